@@ -1,0 +1,25 @@
+"""grapefmu's own error types, so callers can tell bad input from a solver failure."""
+from __future__ import annotations
+
+
+class GrapefmuError(Exception):
+    """Base class of every error grapefmu raises on purpose."""
+
+
+class SceneError(GrapefmuError, ValueError):
+    """A scene value is missing, of the wrong type or outside its allowed range.
+
+    `key` names the offending entry (for example ``berries[1].mass``) so that a
+    user can find it in the TOML file without reading a traceback.
+    """
+
+    def __init__(self, key: str, message: str):
+        self.key = key
+        super().__init__(f"{key}: {message}")
+
+
+class SolverError(GrapefmuError, RuntimeError):
+    """The integrator could not finish the requested interval.
+
+    The solver state is left as it was before the failing call.
+    """

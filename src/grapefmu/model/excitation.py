@@ -1,0 +1,164 @@
+"""Base excitation: the acceleration a(t) = (ax, ay) of the rachis held by the gripper.
+
+Every kind compiles to one of three numeric forms the compiled core evaluates:
+a constant (also the zero-order hold the FMU and ROS node feed), a windowed chirp
+(sine, sweep and half-sine impulse are chirps), or a piecewise-linear table
+(jerk-limited pick-and-place moves and CSV files). Each form lists its breakpoints,
+where a(t) or its derivative jumps; the solver lands a step on every one of them.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from ..errors import SceneError
+
+CONSTANT, CHIRP, TABLE = 0, 1, 2
+
+
+class ExcitationArrays(NamedTuple):
+    """What the compiled core reads: kind code, parameters, table rows (t, ax, ay), breakpoints."""
+
+    kind: int
+    par: np.ndarray
+    table: np.ndarray
+    breaks: np.ndarray
+
+
+@dataclass(frozen=True)
+class Excitation:
+    """A validated excitation. `kind` is the scene's name for it; `arrays` is its compiled form."""
+
+    kind: str
+    arrays: ExcitationArrays
+    description: str = ""
+
+    def accel(self, t: np.ndarray | float) -> np.ndarray:
+        """a(t) as an array (..., 2), evaluated in NumPy (for plots and checks, not the solver)."""
+        t = np.asarray(t, dtype=float)
+        a = self.arrays
+        if a.kind == CONSTANT:
+            return np.broadcast_to(a.par[:2], t.shape + (2,)).copy()
+        if a.kind == CHIRP:
+            ax, ay, f0, f1, start, dur = a.par[:6]
+            tau = t - start
+            on = (tau >= 0) & (tau < dur)
+            s = np.where(on, np.sin(2 * np.pi * (f0 * tau + 0.5 * (f1 - f0) * tau**2 / dur)), 0.0)
+            return np.stack([ax * s, ay * s], axis=-1)
+        tab = a.table
+        inside = (t >= tab[0, 0]) & (t <= tab[-1, 0])
+        return np.stack([np.where(inside, np.interp(t, tab[:, 0], tab[:, i]), 0.0) for i in (1, 2)], axis=-1)
+
+
+def constant(ax: float = 0.0, ay: float = 0.0) -> Excitation:
+    par = np.zeros(6)
+    par[0], par[1] = ax, ay
+    return Excitation("none" if ax == ay == 0.0 else "constant",
+                      ExcitationArrays(CONSTANT, par, np.zeros((1, 3)), np.zeros(0)))
+
+
+def chirp(kind: str, amplitude: tuple[float, float], f_start: float, f_stop: float,
+          start: float, duration: float) -> Excitation:
+    par = np.array([amplitude[0], amplitude[1], f_start, f_stop, start, duration])
+    breaks = np.array([start, start + duration])
+    desc = f"{kind}: amplitude {amplitude} m/s², {f_start:g}→{f_stop:g} Hz from {start:g} s for {duration:g} s"
+    return Excitation(kind, ExcitationArrays(CHIRP, par, np.zeros((1, 3)), breaks), desc)
+
+
+def impulse(peak: tuple[float, float], start: float, duration: float) -> Excitation:
+    """A half-sine acceleration pulse: a chirp at 1/(2·duration) Hz over half a period."""
+    f = 0.5 / duration
+    ex = chirp("impulse", peak, f, f, start, duration)
+    return Excitation("impulse", ex.arrays, f"impulse: half-sine {peak} m/s² peak, {duration:g} s at {start:g} s")
+
+
+def table(kind: str, rows: np.ndarray, description: str = "") -> Excitation:
+    rows = np.ascontiguousarray(rows, dtype=float)
+    return Excitation(kind, ExcitationArrays(TABLE, np.zeros(6), rows, rows[:, 0].copy()), description)
+
+
+def _unit_move_profile(jerk_fraction: float) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised knots (u in [0, 1]) and accelerations of one jerk-limited rest-to-rest move:
+    a trapezoidal acceleration pulse then its mirror, ramps lasting `jerk_fraction` of the move."""
+    j = jerk_fraction
+    u = np.array([0.0, j, 0.5 - j, 0.5, 0.5 + j, 1.0 - j, 1.0])
+    a = np.array([0.0, 1.0, 1.0, 0.0, -1.0, -1.0, 0.0])
+    return u, a
+
+
+def integrate_table(rows: np.ndarray, v0: tuple[float, float] = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
+    """Exact velocity and displacement at the knots of a piecewise-linear acceleration table."""
+    t, a = rows[:, 0], rows[:, 1:3]
+    v = np.zeros_like(a)
+    x = np.zeros_like(a)
+    v[0] = v0
+    for k in range(1, len(t)):
+        h = t[k] - t[k - 1]
+        v[k] = v[k - 1] + 0.5 * h * (a[k - 1] + a[k])
+        x[k] = x[k - 1] + h * v[k - 1] + h * h * (a[k - 1] / 3.0 + a[k] / 6.0)
+    return v, x
+
+
+def pick_and_place(moves: list[tuple[tuple[float, float], float]], start: float = 0.0,
+                   jerk_fraction: float = 0.125) -> Excitation:
+    """Rest-to-rest moves in sequence, each (displacement (dx, dy) in m, duration in s).
+
+    A move of zero displacement is a dwell. Acceleration is piecewise linear, so jerk is
+    bounded and the gripper starts and ends every move at rest.
+    """
+    u, shape = _unit_move_profile(jerk_fraction)
+    _, x_unit = integrate_table(np.column_stack([u, shape, np.zeros_like(u)]))
+    reach = x_unit[-1, 0]  # displacement of a unit-peak, unit-duration move
+    rows = [[0.0, 0.0, 0.0]] if start > 0 else []
+    t0 = start
+    for (dx, dy), dur in moves:
+        peak = math.hypot(dx, dy) / (reach * dur * dur)
+        ux, uy = (dx, dy) if peak == 0 else (dx / math.hypot(dx, dy), dy / math.hypot(dx, dy))
+        for uk, sk in zip(u, shape):
+            tk = t0 + uk * dur
+            if rows and abs(rows[-1][0] - tk) < 1e-15:
+                continue
+            rows.append([tk, peak * sk * ux, peak * sk * uy])
+        t0 += dur
+    desc = f"pick-and-place: {len(moves)} moves, {t0 - start:g} s from {start:g} s"
+    return table("pick-and-place", np.array(rows), desc)
+
+
+def read_csv(path: Path, key: str) -> Excitation:
+    """A CSV of time, ax, ay (header row allowed); linear in between, zero outside."""
+    try:
+        with open(path, newline="") as fh:
+            raw = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+    except OSError as exc:
+        raise SceneError(key, f"cannot read CSV file {path}: {exc.strerror}") from None
+    if raw and not _is_number(raw[0][0]):
+        raw = raw[1:]
+    if len(raw) < 2:
+        raise SceneError(key, f"{path}: need at least two rows of time, ax, ay")
+    rows = []
+    for n, r in enumerate(raw, start=1):
+        if len(r) != 3 or not all(_is_number(c) for c in r):
+            raise SceneError(key, f"{path} row {n}: expected three numbers time, ax, ay, got {r!r}")
+        vals = [float(c) for c in r]
+        if not all(math.isfinite(v) for v in vals):
+            raise SceneError(key, f"{path} row {n}: values must be finite, got {r!r}")
+        rows.append(vals)
+    arr = np.array(rows)
+    if np.any(np.diff(arr[:, 0]) <= 0):
+        raise SceneError(key, f"{path}: time must increase strictly from row to row")
+    if arr[0, 0] < 0:
+        raise SceneError(key, f"{path}: time must start at or after 0 s")
+    return table("csv", arr, f"csv: {path.name}, {len(arr)} rows")
+
+
+def _is_number(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True

@@ -1,0 +1,281 @@
+"""Read a scene from TOML, validating every value (one clear error naming the key and range)."""
+from __future__ import annotations
+
+import itertools
+import math
+import re
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from ..errors import SceneError
+from . import excitation as exc
+from . import validate as v
+from .contact import LAWS, ContactLaw, hertz_stiffness, hunt_crossley_chi, kelvin_voigt_damping
+from .model import Berry, ContactPair, Coupling, Model, Scene, SolverSettings, Thresholds
+
+NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
+#: The largest initial overlap accepted, as a fraction of the smaller radius: beyond it the
+#: linear contact laws are far outside their calibration and the start is almost surely a typo.
+MAX_OVERLAP_FRACTION = 0.2
+
+TOP_KEYS = {"name", "gravity", "berries", "contact", "coupling", "excitation", "solver", "thresholds"}
+BERRY_KEYS = {"name", "mass", "radius", "twig_length", "hinge_x", "hinge_stiffness", "hinge_damping",
+              "angle", "angular_velocity"}
+CONTACT_KEYS = {"law", "stiffness", "effective_modulus", "damping", "restitution", "allow_tension", "pairs"}
+COUPLING_KEYS = {"stiffness", "damping", "pairs"}
+EXCITATION_KEYS = {
+    "none": {"kind"},
+    "impulse": {"kind", "peak", "start", "duration"},
+    "sine": {"kind", "amplitude", "frequency", "start", "duration"},
+    "sweep": {"kind", "amplitude", "f_start", "f_stop", "start", "duration"},
+    "pick-and-place": {"kind", "moves", "start", "jerk_fraction"},
+    "csv": {"kind", "file"},
+}
+SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events"}
+THRESHOLD_KEYS = {"detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction"}
+
+
+def load_scene(path: str | Path) -> Scene:
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise SceneError(str(path), f"cannot read scene file: {e.strerror}") from None
+    return parse_scene(text, base_dir=path.parent, name=path.stem)
+
+
+def parse_scene(text: str, base_dir: Path | None = None, name: str = "scene") -> Scene:
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError("<toml>", f"not valid TOML: {e}") from None
+    return scene_from_dict(doc, base_dir or Path.cwd(), source=text, name=name)
+
+
+def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name: str = "scene") -> Scene:
+    v.no_unknown_keys("", doc, TOP_KEYS)
+    name = doc.get("name", name)
+    if not isinstance(name, str):
+        raise SceneError("name", f"expected a string, got {name!r}")
+    gravity = v.number("gravity", doc.get("gravity", 9.81), 0.0, 100.0, unit="m/s²")
+    berries, angles, rates = _berries(doc.get("berries"))
+    names = [b.name for b in berries]
+    pairs = _contact(doc.get("contact"), berries) if "contact" in doc else ()
+    couplings = _coupling(doc["coupling"], berries) if "coupling" in doc else ()
+    model = Model(tuple(berries), tuple(pairs), tuple(couplings), gravity)
+    solver = _solver(doc.get("solver", {}))
+    excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)
+    thresholds = _thresholds(doc.get("thresholds", {}))
+    _check_overlap(model, angles, names)
+    return Scene(model, tuple(angles), tuple(rates), excitation, solver, thresholds, source, name)
+
+
+def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
+    if not isinstance(raw, list) or not raw:
+        raise SceneError("berries", "expected at least one [[berries]] table")
+    berries, angles, rates, seen = [], [], [], set()
+    for n, b in enumerate(raw):
+        key = f"berries[{n}]"
+        v.table(key, b)
+        v.no_unknown_keys(key, b, BERRY_KEYS)
+        for req in ("name", "mass", "radius", "twig_length", "hinge_x"):
+            if req not in b:
+                raise SceneError(f"{key}.{req}", "missing (required)")
+        nm = b["name"]
+        if not isinstance(nm, str) or not NAME_RE.match(nm):
+            raise SceneError(f"{key}.name", f"expected an identifier of letters, digits and _ (at most 32), got {nm!r}")
+        if nm in seen:
+            raise SceneError(f"{key}.name", f"duplicate berry name {nm!r}")
+        seen.add(nm)
+        mass = v.number(f"{key}.mass", b["mass"], 0.0, 10.0, lo_open=True, unit="kg")
+        radius = v.number(f"{key}.radius", b["radius"], 0.0, 0.1, lo_open=True, unit="m")
+        length = v.number(f"{key}.twig_length", b["twig_length"], 0.0, 1.0, lo_open=True, unit="m")
+        if radius >= length:
+            raise SceneError(f"{key}.radius", f"must be smaller than twig_length ({length:g} m), got {radius:g} m")
+        hx = v.number(f"{key}.hinge_x", b["hinge_x"], -1.0, 1.0, unit="m")
+        kh = v.number(f"{key}.hinge_stiffness", b.get("hinge_stiffness", 0.0), 0.0, 1e3, unit="N·m/rad")
+        ch = v.number(f"{key}.hinge_damping", b.get("hinge_damping", 0.0), 0.0, 1e3, unit="N·m·s/rad")
+        angles.append(v.number(f"{key}.angle", b.get("angle", 0.0), -math.pi, math.pi, unit="rad"))
+        rates.append(v.number(f"{key}.angular_velocity", b.get("angular_velocity", 0.0), -1e3, 1e3, unit="rad/s"))
+        berries.append(Berry(nm, mass, radius, length, hx, kh, ch))
+    return berries, angles, rates
+
+
+def _pair_list(key: str, raw: Any, berries: list[Berry], default: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    if raw is None:
+        return default
+    index = {b.name: i for i, b in enumerate(berries)}
+    if not isinstance(raw, list):
+        raise SceneError(key, "expected a list of [name, name] pairs")
+    out = []
+    for n, p in enumerate(raw):
+        if not (isinstance(p, list) and len(p) == 2 and all(isinstance(s, str) for s in p)):
+            raise SceneError(f"{key}[{n}]", f"expected [name, name], got {p!r}")
+        for s in p:
+            if s not in index:
+                raise SceneError(f"{key}[{n}]", f"unknown berry {s!r}; berries: {', '.join(index)}")
+        i, j = index[p[0]], index[p[1]]
+        if i == j:
+            raise SceneError(f"{key}[{n}]", "a berry cannot pair with itself")
+        pr = (min(i, j), max(i, j))
+        if pr in out:
+            raise SceneError(f"{key}[{n}]", f"duplicate pair {p!r}")
+        out.append(pr)
+    return out
+
+
+def _contact(raw: Any, berries: list[Berry]) -> list[ContactPair]:
+    key = "contact"
+    v.table(key, raw)
+    v.no_unknown_keys(key, raw, CONTACT_KEYS)
+    law = v.choice(f"{key}.law", raw.get("law", "kelvin-voigt"), LAWS)
+    clamp = not v.boolean(f"{key}.allow_tension", raw.get("allow_tension", False))
+    if not clamp and law != "kelvin-voigt":
+        raise SceneError(f"{key}.allow_tension", "only the kelvin-voigt law has a pulling branch to allow")
+    if "damping" in raw and "restitution" in raw:
+        raise SceneError(f"{key}.restitution", "give damping or restitution, not both")
+    if law != "kelvin-voigt" and "stiffness" in raw and "effective_modulus" in raw:
+        raise SceneError(f"{key}.effective_modulus", "give stiffness or effective_modulus, not both")
+    if law == "kelvin-voigt" and "effective_modulus" in raw:
+        raise SceneError(f"{key}.effective_modulus", "only for the hertz and hunt-crossley laws")
+    if law == "hertz" and ("damping" in raw or "restitution" in raw):
+        raise SceneError(f"{key}.{'damping' if 'damping' in raw else 'restitution'}",
+                         "the hertz law is elastic; use hunt-crossley for a damped Hertz contact")
+    e = v.number(f"{key}.restitution", raw["restitution"], 0.0, 1.0, lo_open=True) if "restitution" in raw else None
+    all_pairs = list(itertools.combinations(range(len(berries)), 2))
+    pairs = []
+    for i, j in _pair_list(f"{key}.pairs", raw.get("pairs"), berries, all_pairs):
+        bi, bj = berries[i], berries[j]
+        if law == "kelvin-voigt":
+            k = v.number(f"{key}.stiffness", raw.get("stiffness", 2000.0), 0.0, 1e9, lo_open=True, unit="N/m")
+            m_eff = bi.mass * bj.mass / (bi.mass + bj.mass)
+            c = (kelvin_voigt_damping(e, k, m_eff) if e is not None
+                 else v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e6, unit="N·s/m"))
+        else:
+            if "effective_modulus" in raw:
+                emod = v.number(f"{key}.effective_modulus", raw["effective_modulus"], 0.0, 1e12, lo_open=True, unit="Pa")
+                k = hertz_stiffness(emod, bi.radius, bj.radius)
+            else:
+                k = v.number(f"{key}.stiffness", raw.get("stiffness", 1.1e5), 0.0, 1e12, lo_open=True, unit="N/m^1.5")
+            if law == "hertz":
+                c = 0.0
+            elif e is not None:
+                c = hunt_crossley_chi(e)
+            else:
+                c = v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e3, unit="(χ, dimensionless)")
+        pairs.append(ContactPair(i, j, ContactLaw(law, k, c, clamp, e)))
+    return pairs
+
+
+def _coupling(raw: Any, berries: list[Berry]) -> list[Coupling]:
+    key = "coupling"
+    v.table(key, raw)
+    v.no_unknown_keys(key, raw, COUPLING_KEYS)
+    k = v.number(f"{key}.stiffness", raw.get("stiffness", 0.0), 0.0, 1e6, unit="N/m")
+    c = v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e4, unit="N·s/m")
+    order = sorted(range(len(berries)), key=lambda i: berries[i].hinge_x)
+    neighbours = [tuple(sorted(p)) for p in zip(order, order[1:])]
+    return [Coupling(i, j, k, c) for i, j in _pair_list(f"{key}.pairs", raw.get("pairs"), berries, neighbours)]
+
+
+def _solver(raw: Any) -> SolverSettings:
+    key = "solver"
+    v.table(key, raw)
+    v.no_unknown_keys(key, raw, SOLVER_KEYS)
+    d = SolverSettings()
+    t_end = v.number(f"{key}.t_end", raw.get("t_end", d.t_end), 0.0, 1e5, lo_open=True, unit="s")
+    return SolverSettings(
+        method=v.choice(f"{key}.method", raw.get("method", d.method), ("event", "paper", "reference")),
+        rtol=v.number(f"{key}.rtol", raw.get("rtol", d.rtol), 1e-14, 0.1),
+        atol=v.number(f"{key}.atol", raw.get("atol", d.atol), 1e-16, 1.0, lo_open=True),
+        t_end=t_end,
+        output_interval=v.number(f"{key}.output_interval", raw.get("output_interval", d.output_interval),
+                                 1e-6, t_end, unit="s"),
+        fixed_step=v.number(f"{key}.fixed_step", raw.get("fixed_step", d.fixed_step), 0.0, 1.0, unit="s"),
+        zeno_window=v.number(f"{key}.zeno_window", raw.get("zeno_window", d.zeno_window), 0.0, 10.0,
+                             lo_open=True, unit="s"),
+        zeno_max_events=v.integer(f"{key}.zeno_max_events", raw.get("zeno_max_events", d.zeno_max_events), 2, 10**6),
+    )
+
+
+def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
+    key = "excitation"
+    v.table(key, raw)
+    kind = v.choice(f"{key}.kind", raw.get("kind", "none"), tuple(EXCITATION_KEYS))
+    v.no_unknown_keys(key, raw, EXCITATION_KEYS[kind])
+    acc = 1e3  # m/s², about 100 g: far beyond any gripper, so larger is a unit mistake
+    if kind == "none":
+        return exc.constant()
+    if kind == "csv":
+        f = raw.get("file")
+        if not isinstance(f, str):
+            raise SceneError(f"{key}.file", f"expected a path to a CSV of time, ax, ay, got {f!r}")
+        ex = exc.read_csv(base_dir / f, f"{key}.file")
+        if abs(ex.arrays.table[:, 1:]).max() > acc:
+            raise SceneError(f"{key}.file", f"accelerations must stay within ±{acc:g} m/s²")
+        return ex
+    start = v.number(f"{key}.start", raw.get("start", 0.0), 0.0, 1e5, unit="s")
+    if kind == "pick-and-place":
+        moves_raw = raw.get("moves")
+        if not isinstance(moves_raw, list) or not moves_raw:
+            raise SceneError(f"{key}.moves", "expected a list of {displacement = [dx, dy], duration = T} tables")
+        moves = []
+        for n, m in enumerate(moves_raw):
+            mk = f"{key}.moves[{n}]"
+            v.table(mk, m)
+            v.no_unknown_keys(mk, m, {"displacement", "duration"})
+            d = v.vector2(f"{mk}.displacement", m.get("displacement"), -10.0, 10.0, "m")
+            T = v.number(f"{mk}.duration", m.get("duration"), 1e-3, 1e4, unit="s")
+            moves.append((d, T))
+        jf = v.number(f"{key}.jerk_fraction", raw.get("jerk_fraction", 0.125), 0.0, 0.25, lo_open=True)
+        ex = exc.pick_and_place(moves, start, jf)
+        peak = abs(ex.arrays.table[:, 1:]).max()
+        if peak > acc:
+            raise SceneError(f"{key}.moves", f"peak acceleration {peak:.3g} m/s² exceeds ±{acc:g} m/s²; lengthen a move")
+        return ex
+    if kind == "impulse":
+        peak = v.vector2(f"{key}.peak", raw.get("peak"), -acc, acc, "m/s²")
+        dur = v.number(f"{key}.duration", raw.get("duration", 0.01), 1e-6, 10.0, unit="s")
+        return exc.impulse(peak, start, dur)
+    amp = v.vector2(f"{key}.amplitude", raw.get("amplitude"), -acc, acc, "m/s²")
+    dur = v.number(f"{key}.duration", raw.get("duration", max(t_end - start, 1e-3)), 1e-3, 1e5, unit="s")
+    if kind == "sine":
+        f = v.number(f"{key}.frequency", raw.get("frequency"), 0.0, 1e4, lo_open=True, unit="Hz")
+        return exc.chirp("sine", amp, f, f, start, dur)
+    f0 = v.number(f"{key}.f_start", raw.get("f_start"), 0.0, 1e4, lo_open=True, unit="Hz")
+    f1 = v.number(f"{key}.f_stop", raw.get("f_stop"), 0.0, 1e4, lo_open=True, unit="Hz")
+    return exc.chirp("sweep", amp, f0, f1, start, dur)
+
+
+def _thresholds(raw: Any) -> Thresholds:
+    key = "thresholds"
+    v.table(key, raw)
+    v.no_unknown_keys(key, raw, THRESHOLD_KEYS)
+    d = Thresholds()
+    return Thresholds(
+        detachment_force=v.number(f"{key}.detachment_force", raw.get("detachment_force", d.detachment_force),
+                                  0.0, 1e4, lo_open=True, unit="N"),
+        bruise_force=v.number(f"{key}.bruise_force", raw.get("bruise_force", d.bruise_force), 0.0, 1e4,
+                              lo_open=True, unit="N"),
+        bruise_energy=v.number(f"{key}.bruise_energy", raw.get("bruise_energy", d.bruise_energy), 0.0, 1e3,
+                               lo_open=True, unit="J"),
+        fatigue_fraction=v.number(f"{key}.fatigue_fraction", raw.get("fatigue_fraction", d.fatigue_fraction),
+                                  0.0, 1.0, lo_open=True),
+    )
+
+
+def _check_overlap(model: Model, angles: list[float], names: list[str]) -> None:
+    """Reject starts (or hanging rest states) that overlap far beyond what a contact law can mean."""
+    for pr in model.pairs:
+        bi, bj = model.berries[pr.i], model.berries[pr.j]
+        bound = MAX_OVERLAP_FRACTION * min(bi.radius, bj.radius)
+        for label, qi, qj in (("initial", angles[pr.i], angles[pr.j]), ("hanging rest", 0.0, 0.0)):
+            dx = bj.hinge_x + bj.twig_length * math.sin(qj) - bi.hinge_x - bi.twig_length * math.sin(qi)
+            dy = -bj.twig_length * math.cos(qj) + bi.twig_length * math.cos(qi)
+            overlap = bi.radius + bj.radius - math.hypot(dx, dy)
+            if overlap > bound:
+                raise SceneError(
+                    f"berries[{pr.j}].hinge_x" if label == "hanging rest" else f"berries[{pr.j}].angle",
+                    f"berries {names[pr.i]!r} and {names[pr.j]!r} overlap by {overlap * 1e3:.3g} mm in the {label} "
+                    f"state; at most {bound * 1e3:.3g} mm ({MAX_OVERLAP_FRACTION:g} of the smaller radius) is allowed")

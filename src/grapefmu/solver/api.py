@@ -1,0 +1,22 @@
+"""`simulate(scene)`: a whole run with the method the scene (or the caller) asks for."""
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from ..model.model import Scene
+from ..results.run import Run
+from .solver import Solver
+
+
+def simulate(scene: Scene, t_end: float | None = None, *, method: str | None = None, rtol: float | None = None,
+             atol: float | None = None, fixed_step: float | None = None, output_interval: float | None = None,
+             progress: Callable[[float, float], None] | None = None) -> Run:
+    method = method or scene.solver.method
+    if method == "reference":
+        from .reference import simulate_reference
+        return simulate_reference(scene, t_end, rtol=rtol, atol=atol, output_interval=output_interval)
+    solver = Solver(scene, method=method, rtol=rtol, atol=atol, fixed_step=fixed_step)
+    return solver.run(t_end, output_interval, progress)
+
+
+__all__ = ["Solver", "simulate"]

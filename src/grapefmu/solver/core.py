@@ -1,0 +1,444 @@
+"""The compiled event-driven integration loop (docs/solver.md).
+
+One accepted Runge–Kutta step at a time: sample the contact functions on the step's
+dense output (so a contact that opens and closes inside one step is still seen),
+locate the earliest switch to ~1e-13 s, truncate the step there, restart just past
+the switching surface in the mode the state is now in, and never straddle an
+excitation breakpoint. Impacts, peaks and the Zeno guard are booked here, in the
+same pass, so nothing is recomputed afterwards.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..physics.dynamics import (HC, HC_MIN_APPROACH_SPEED, KV, base_accel, berry_forces, contact_law, jit,
+                                pair_force, pair_kinematics, pedicel_tension, rhs)
+
+# float slots of S.fl
+T, H, T_PREV, H_LAST, GRID_T0, GRID_DT = range(6)
+# int slots of S.it
+N_STEPS, N_REJECTED, N_RHS, N_SWITCHES, N_IMPACTS, N_ZENO, BREAK_IDX, GRID_K, N_OUT, N_IMP, STATUS = range(11)
+# slots of cfg
+RTOL, ATOL, FIXED, ZENO_WIN, LOCATE, HMAX = range(6)
+# statuses
+DONE, OUT_FULL, IMP_FULL, MAX_STEPS, STEP_UNDERFLOW, NOT_FINITE = range(6)
+# columns of an impact row
+I_PAIR, I_ONSET, I_END, I_SPEED, I_PEAK, I_TPEAK, I_IMPULSE, I_DISS, I_SEP_SPEED = range(9)
+IMPACT_COLUMNS = 9
+# columns of an open impact
+O_ONSET, O_SPEED, O_PEAK, O_TPEAK, O_J, O_D = range(6)
+# contact event functions
+EV_DELTA, EV_PHI = 0, 1
+N_SAMPLES = 8          # dense-output samples per step searched for a sign change
+ROOT_TOL = 1e-13       # s, absolute tolerance of event times
+
+
+@jit
+def dense(theta, y0, q, h, out):
+    """y(t0 + θh) = y0 + h Σ_j Q[:, j] θ^(j+1)."""
+    for r in range(y0.shape[0]):
+        acc = 0.0
+        for j in range(q.shape[1] - 1, -1, -1):
+            acc = (acc + q[r, j]) * theta
+        out[r] = y0[r] + h * acc
+
+
+@jit
+def rms_norm(x, scale):
+    s = 0.0
+    for i in range(x.shape[0]):
+        s += (x[i] / scale[i]) ** 2
+    return math.sqrt(s / x.shape[0])
+
+
+@jit
+def event_value(fn, sign, p, y, M, v_onset):
+    i, j = M.pair_idx[p, 0], M.pair_idx[p, 1]
+    delta, delta_dot, _, _ = pair_kinematics(y, M.berry, i, j, M.berry.shape[0])
+    if fn == EV_DELTA:
+        return sign * delta
+    _, _, phi = contact_law(M.pair_law[p], M.pair_par[p], delta, delta_dot, v_onset[p])
+    return sign * phi
+
+
+@jit
+def active_events(mode, law, par):
+    """(fn, sign) pairs watched in a mode: an event is where sign·fn turns positive."""
+    clamped = par[2] > 0.5 and law != 1
+    if mode == 0:
+        return 1, EV_DELTA, 1.0, EV_PHI, 0.0
+    if mode == 1:
+        return (2 if clamped else 1), EV_DELTA, -1.0, EV_PHI, -1.0
+    return 2, EV_DELTA, -1.0, EV_PHI, 1.0
+
+
+@jit
+def classify(p, y, M, v_onset, old_mode):
+    """The mode the state is in: 0 apart, 1 loaded, 2 overlapping but unloaded."""
+    i, j = M.pair_idx[p, 0], M.pair_idx[p, 1]
+    delta, delta_dot, _, _ = pair_kinematics(y, M.berry, i, j, M.berry.shape[0])
+    if delta <= 0.0:
+        return 0, delta_dot
+    vo = v_onset[p] if old_mode != 0 else max(delta_dot, HC_MIN_APPROACH_SPEED)
+    vsave = v_onset[p]
+    v_onset[p] = vo
+    _, _, phi = contact_law(M.pair_law[p], M.pair_par[p], delta, delta_dot, vo)
+    v_onset[p] = vsave
+    return (1 if phi > 0.0 else 2), delta_dot
+
+
+@jit
+def locate_root(fn, sign, p, ta, tb, y0, q, h, M, v_onset, work, tol):
+    """Illinois iteration on θ ∈ [ta, tb] with v(ta) ≤ 0 < v(tb); returns the right end."""
+    dense(ta, y0, q, h, work)
+    va = event_value(fn, sign, p, work, M, v_onset)
+    dense(tb, y0, q, h, work)
+    vb = event_value(fn, sign, p, work, M, v_onset)
+    side = 0
+    for _ in range(200):
+        if (tb - ta) * h <= tol:
+            break
+        if va < vb and va <= 0.0 < vb:
+            tm = (ta * vb - tb * va) / (vb - va)
+        else:
+            tm = 0.5 * (ta + tb)
+        if not (ta < tm < tb):
+            tm = 0.5 * (ta + tb)
+        # keep the bracket shrinking from both sides
+        if (tb - ta) * h < 64 * tol:
+            tm = 0.5 * (ta + tb)
+        dense(tm, y0, q, h, work)
+        vm = event_value(fn, sign, p, work, M, v_onset)
+        if vm > 0.0:
+            tb, vb = tm, vm
+            if side == 1:
+                va *= 0.5
+            side = 1
+        else:
+            ta, va = tm, vm
+            if side == -1:
+                vb *= 0.5
+            side = -1
+    return tb
+
+
+@jit
+def switch_pair(p, new_mode, t, y, delta_dot, S, B, cfg, n):
+    """Change a pair's mode and keep the impact book and the Zeno guard."""
+    old = S.mode[p]
+    if old == new_mode:
+        return
+    npair = S.mode.shape[0]
+    nc = y.shape[0] - 3 * n - 2 * npair - 5
+    o_d = 3 * n + nc + p
+    o_j = 3 * n + nc + npair + p
+    if old == 0:
+        S.v_onset[p] = max(delta_dot, HC_MIN_APPROACH_SPEED)
+        S.imp_open[p, O_ONSET] = t
+        S.imp_open[p, O_SPEED] = delta_dot
+        S.imp_open[p, O_PEAK] = 0.0
+        S.imp_open[p, O_TPEAK] = t
+        S.imp_open[p, O_J] = y[o_j]
+        S.imp_open[p, O_D] = y[o_d]
+        S.it[N_IMPACTS] += 1
+    elif new_mode == 0:
+        k = S.it[N_IMP]
+        row = B.imp[k]
+        row[I_PAIR] = p
+        row[I_ONSET] = S.imp_open[p, O_ONSET]
+        row[I_END] = t
+        row[I_SPEED] = S.imp_open[p, O_SPEED]
+        row[I_PEAK] = S.imp_open[p, O_PEAK]
+        row[I_TPEAK] = S.imp_open[p, O_TPEAK]
+        row[I_IMPULSE] = y[o_j] - S.imp_open[p, O_J]
+        row[I_DISS] = y[o_d] - S.imp_open[p, O_D]
+        row[I_SEP_SPEED] = -delta_dot
+        S.it[N_IMP] = k + 1
+    S.mode[p] = new_mode
+    S.it[N_SWITCHES] += 1
+    kz = S.ring.shape[1]
+    pos = S.ring_pos[p]
+    S.ring[p, pos] = t
+    pos = (pos + 1) % kz
+    S.ring_pos[p] = pos
+    if t - S.ring[p, pos] < cfg[ZENO_WIN]:
+        S.smooth[p] = True
+        S.smooth_until[p] = t + cfg[ZENO_WIN]
+        S.it[N_ZENO] += 1
+
+
+@jit
+def initial_step(t0, y0, f0, M, X, S, cfg, order, t_stop):
+    ny = y0.shape[0]
+    scale = cfg[ATOL] + cfg[RTOL] * np.abs(y0)
+    d0 = rms_norm(y0, scale)
+    d1 = rms_norm(f0, scale)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, t_stop - t0)
+    y1 = y0 + h0 * f0
+    f1 = np.empty(ny)
+    rhs(t0 + h0, t0, y1, f1, S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
+    d2 = rms_norm(f1 - f0, scale) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / (order + 1))
+    return min(100 * h0, h1, cfg[HMAX])
+
+
+@jit
+def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pbuf, fext, tens, cls):
+    """Peaks of contact force and pedicel tension on the step's samples (refined around an
+    interior maximum of the force), and each pair's mode class at every sample."""
+    npair = S.mode.shape[0]
+    n = M.berry.shape[0]
+    for k in range(N_SAMPLES + 1):
+        th = theta_end * k / N_SAMPLES
+        dense(th, y0, q, h, work)
+        t = t0 + th * h
+        berry_forces(work, S.mode, S.v_onset, S.smooth, M, fbuf[k], pbuf, fext)
+        ax, ay = base_accel(X.kind, X.par, X.table, t, t0)
+        pedicel_tension(work, ax, ay, fext, M, tens)
+        for i in range(n):
+            if tens[i] > S.peak_tension[i]:
+                S.peak_tension[i] = tens[i]
+        for p in range(npair):
+            cls[k, p] = classify(p, work, M, S.v_onset, S.mode[p])[0]
+    for p in range(npair):
+        if S.mode[p] == 0 and not S.smooth[p]:
+            continue
+        kbest = 0
+        for k in range(1, N_SAMPLES + 1):
+            if fbuf[k, p] > fbuf[kbest, p]:
+                kbest = k
+        fbest = fbuf[kbest, p]
+        tbest = theta_end * kbest / N_SAMPLES
+        if 0 < kbest < N_SAMPLES:
+            # golden-section search between the neighbouring samples
+            a = theta_end * (kbest - 1) / N_SAMPLES
+            b = theta_end * (kbest + 1) / N_SAMPLES
+            gr = 0.6180339887498949
+            for _ in range(40):
+                c1 = b - gr * (b - a)
+                c2 = a + gr * (b - a)
+                dense(c1, y0, q, h, work)
+                f1 = pair_force(p, work, S.mode, S.v_onset, S.smooth, M)[0]
+                dense(c2, y0, q, h, work)
+                f2 = pair_force(p, work, S.mode, S.v_onset, S.smooth, M)[0]
+                if f1 > f2:
+                    b = c2
+                else:
+                    a = c1
+                if (b - a) * h < 1e-12:
+                    break
+            tm = 0.5 * (a + b)
+            dense(tm, y0, q, h, work)
+            fm = pair_force(p, work, S.mode, S.v_onset, S.smooth, M)[0]
+            if fm > fbest:
+                fbest, tbest = fm, tm
+        if fbest > S.peak_force[p]:
+            S.peak_force[p] = fbest
+        if fbest > S.imp_open[p, O_PEAK]:
+            S.imp_open[p, O_PEAK] = fbest
+            S.imp_open[p, O_TPEAK] = t0 + tbest * h
+
+
+@jit
+def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
+    """Advance S to t_target (or until a buffer fills or max_steps). Returns a status code."""
+    n = M.berry.shape[0]
+    npair = S.mode.shape[0]
+    ny = S.y.shape[0]
+    ns = TB.b.shape[0]
+    kd = TB.p.shape[1]
+    locate = cfg[LOCATE] > 0.5
+    fixed = cfg[FIXED] > 0.0
+    err_exp = -1.0 / (TB.error_order + 1.0)
+    stages = S.k
+    ytmp = np.empty(ny)
+    ynew = np.empty(ny)
+    err = np.empty(ny)
+    scale = np.empty(ny)
+    work = np.empty(ny)
+    q = S.q
+    fbuf = np.zeros((N_SAMPLES + 1, max(npair, 1)))
+    pbuf = np.zeros(max(npair, 1))
+    fext = np.zeros((n, 2))
+    tens = np.zeros(n)
+    cls = np.zeros((N_SAMPLES + 1, max(npair, 1)), dtype=np.int64)
+    nbreak = X.breaks.shape[0]
+    cap_out = B.t.shape[0]
+    cap_imp = B.imp.shape[0]
+    steps = 0
+    while S.fl[T] < t_target:
+        if steps >= max_steps:
+            return MAX_STEPS
+        if S.it[N_IMP] + npair > cap_imp:
+            return IMP_FULL
+        t0 = S.fl[T]
+        bi = S.it[BREAK_IDX]
+        while bi < nbreak and X.breaks[bi] <= t0:
+            bi += 1
+        S.it[BREAK_IDX] = bi
+        t_stop = t_target
+        if bi < nbreak and X.breaks[bi] < t_stop:
+            t_stop = X.breaks[bi]
+        if fixed:
+            h_prop = cfg[FIXED]
+        else:
+            if S.fl[H] <= 0.0:
+                S.fl[H] = initial_step(t0, S.y, S.f, M, X, S, cfg, TB.order, t_stop)
+                S.it[N_RHS] += 1
+            h_prop = min(S.fl[H], cfg[HMAX])
+        h = h_prop
+        clipped = False
+        if t0 + h >= t_stop or t_stop - (t0 + h) < 1e-9 * h:
+            h = t_stop - t0
+            clipped = True
+        t_new = t_stop if clipped else t0 + h
+        # --- one Runge–Kutta trial step
+        stages[0, :] = S.f
+        for st in range(1, ns):
+            for r in range(ny):
+                acc = 0.0
+                for m in range(st):
+                    acc += TB.a[st, m] * stages[m, r]
+                ytmp[r] = S.y[r] + h * acc
+            rhs(t0 + TB.c[st] * h, t0, ytmp, stages[st], S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
+        for r in range(ny):
+            acc = 0.0
+            for m in range(ns):
+                acc += TB.b[m] * stages[m, r]
+            ynew[r] = S.y[r] + h * acc
+        rhs(t_new, t0, ynew, stages[ns], S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
+        S.it[N_RHS] += ns
+        finite = True
+        for r in range(ny):
+            if not math.isfinite(ynew[r]):
+                finite = False
+                break
+        if fixed:
+            if not finite:
+                return NOT_FINITE
+            en = 0.0
+        else:
+            for r in range(ny):
+                acc = 0.0
+                for m in range(ns + 1):
+                    acc += TB.e[m] * stages[m, r]
+                err[r] = h * acc
+                scale[r] = cfg[ATOL] + cfg[RTOL] * max(abs(S.y[r]), abs(ynew[r]))
+            en = rms_norm(err, scale) if finite else np.inf
+            if not (en <= 1.0):
+                fac = 0.2 if not math.isfinite(en) else max(0.2, 0.9 * en ** err_exp)
+                S.fl[H] = h * fac
+                S.it[N_REJECTED] += 1
+                if S.fl[H] < 1e-15 * max(1.0, abs(t0)) * 16:
+                    return STEP_UNDERFLOW if finite else NOT_FINITE
+                continue
+        # --- accepted: dense-output coefficients
+        for r in range(ny):
+            for j in range(kd):
+                acc = 0.0
+                for m in range(ns + 1):
+                    acc += stages[m, r] * TB.p[m, j]
+                q[r, j] = acc
+        # --- earliest contact switch inside the step
+        theta_e = 1.0
+        event = False
+        if locate:
+            tol = max(ROOT_TOL, 8 * 2.2e-16 * abs(t0))
+            for k in range(1, N_SAMPLES + 1):
+                th = k / N_SAMPLES
+                dense(th, S.y, q, h, work)
+                best = 2.0
+                for p in range(npair):
+                    if S.smooth[p]:
+                        continue
+                    na, f1, s1, f2, s2 = active_events(S.mode[p], M.pair_law[p], M.pair_par[p])
+                    for a in range(na):
+                        fn = f1 if a == 0 else f2
+                        sg = s1 if a == 0 else s2
+                        if event_value(fn, sg, p, work, M, S.v_onset) > 0.0:
+                            th0 = (k - 1) / N_SAMPLES
+                            dense(th0, S.y, q, h, ytmp)
+                            if event_value(fn, sg, p, ytmp, M, S.v_onset) > 0.0:
+                                root = th0  # inconsistent start: switch at once, no advance
+                            else:
+                                root = locate_root(fn, sg, p, th0, th, S.y, q, h, M, S.v_onset, ytmp, tol)
+                            if root < best:
+                                best = root
+                            dense(th, S.y, q, h, work)
+                if best <= 1.0:
+                    theta_e = best
+                    event = True
+                    break
+        t_commit = t_new if not event or theta_e >= 1.0 else t0 + theta_e * h
+        # --- grid output in (t0, t_commit]
+        dt_out = S.fl[GRID_DT]
+        if dt_out > 0.0:
+            kg = S.it[GRID_K]
+            last = int(math.floor((t_commit - S.fl[GRID_T0]) / dt_out + 1e-9))
+            if last - kg + 1 > cap_out - S.it[N_OUT]:
+                return OUT_FULL
+            while kg <= last:
+                tg = min(S.fl[GRID_T0] + kg * dt_out, t_commit)
+                th = (tg - t0) / h
+                o = S.it[N_OUT]
+                dense(th, S.y, q, h, B.y[o])
+                B.t[o] = tg
+                ax, ay = base_accel(X.kind, X.par, X.table, tg, t0)
+                B.acc[o, 0] = ax
+                B.acc[o, 1] = ay
+                for p in range(npair):
+                    B.mode[o, p] = S.mode[p]
+                    B.v_onset[o, p] = S.v_onset[p]
+                    B.smooth[o, p] = S.smooth[p]
+                S.it[N_OUT] = o + 1
+                kg += 1
+            S.it[GRID_K] = kg
+        # --- peaks and classes on the committed part of the step
+        sample_step(t0, h, theta_e, S.y, q, M, X, S, work, fbuf, pbuf, fext, tens, cls)
+        # --- commit
+        S.y_prev[:] = S.y
+        if event:
+            dense(theta_e, S.y_prev, q, h, S.y)
+        else:
+            S.y[:] = ynew
+        S.fl[T_PREV] = t0
+        S.fl[H_LAST] = h
+        S.fl[T] = t_commit
+        S.it[N_STEPS] += 1
+        steps += 1
+        changed = False
+        for p in range(npair):
+            if S.smooth[p]:
+                if t_commit >= S.smooth_until[p]:
+                    c0 = cls[0, p]
+                    same = True
+                    for k in range(1, N_SAMPLES + 1):
+                        if cls[k, p] != c0:
+                            same = False
+                    if same:
+                        S.smooth[p] = False
+                        new, dd = classify(p, S.y, M, S.v_onset, S.mode[p])
+                        switch_pair(p, new, t_commit, S.y, dd, S, B, cfg, n)
+                        changed = True
+                continue
+            if event or not locate:
+                new, dd = classify(p, S.y, M, S.v_onset, S.mode[p])
+                if new != S.mode[p]:
+                    switch_pair(p, new, t_commit, S.y, dd, S, B, cfg, n)
+                    changed = True
+        if changed or event or (bi < nbreak and t_commit >= X.breaks[bi]):
+            rhs(t_commit, t_commit, S.y, S.f, S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
+            S.it[N_RHS] += 1
+        else:
+            S.f[:] = stages[ns]
+        if not fixed:
+            fac = 10.0 if en == 0.0 else min(10.0, max(0.2, 0.9 * en ** err_exp))
+            S.fl[H] = h_prop if (clipped or event) and fac * h < h_prop else h * fac
+    return DONE
+
