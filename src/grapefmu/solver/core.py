@@ -215,10 +215,11 @@ def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pbuf, fext, tens, 
                 kbest = k
         fbest = fbuf[kbest, p]
         tbest = theta_end * kbest / N_SAMPLES
-        if 0 < kbest < N_SAMPLES:
-            # golden-section search between the neighbouring samples
-            a = theta_end * (kbest - 1) / N_SAMPLES
-            b = theta_end * (kbest + 1) / N_SAMPLES
+        if fbest > 0.0 and fbest >= S.imp_open[p, O_PEAK]:
+            # golden-section search between the neighbouring samples (one-sided at the step's ends,
+            # where the peak may sit just inside this step)
+            a = theta_end * max(kbest - 1, 0) / N_SAMPLES
+            b = theta_end * min(kbest + 1, N_SAMPLES) / N_SAMPLES
             gr = 0.6180339887498949
             for _ in range(40):
                 c1 = b - gr * (b - a)
@@ -246,6 +247,87 @@ def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pbuf, fext, tens, 
 
 
 @jit
+def _max_on(fn, sign, p, a, b, y0, q, h, M, v_onset, work):
+    """Golden-section search for the largest sign·fn on [a, b] (θ units); returns (θ, value)."""
+    gr = 0.6180339887498949
+    c1 = b - gr * (b - a)
+    c2 = a + gr * (b - a)
+    dense(c1, y0, q, h, work)
+    f1 = event_value(fn, sign, p, work, M, v_onset)
+    dense(c2, y0, q, h, work)
+    f2 = event_value(fn, sign, p, work, M, v_onset)
+    for _ in range(60):
+        if f1 > 0.0 or f2 > 0.0 or (b - a) * h < ROOT_TOL:
+            break
+        if f1 > f2:
+            b, c2, f2 = c2, c1, f1
+            c1 = b - gr * (b - a)
+            dense(c1, y0, q, h, work)
+            f1 = event_value(fn, sign, p, work, M, v_onset)
+        else:
+            a, c1, f1 = c1, c2, f2
+            c2 = a + gr * (b - a)
+            dense(c2, y0, q, h, work)
+            f2 = event_value(fn, sign, p, work, M, v_onset)
+    return (c1, f1) if f1 > f2 else (c2, f2)
+
+
+@jit
+def find_event(y0, q, h, t0, M, S, vbuf, ytmp, work):
+    """Earliest θ in (0, 1] where a watched contact function turns positive, or (1, False).
+
+    Each function is sampled at N_SAMPLES + 1 points. A sign change gives a bracket at once;
+    a sampled local maximum that is still ≤ 0 but close to zero is refined by a golden-section
+    search, so a graze that opens and closes between two samples is not missed."""
+    npair = S.mode.shape[0]
+    tol = max(ROOT_TOL, 8 * 2.2e-16 * abs(t0))
+    for k in range(N_SAMPLES + 1):
+        dense(k / N_SAMPLES, y0, q, h, work)
+        for p in range(npair):
+            na, f1, s1, f2, s2 = active_events(S.mode[p], M.pair_law[p], M.pair_par[p])
+            vbuf[k, 2 * p] = event_value(f1, s1, p, work, M, S.v_onset)
+            vbuf[k, 2 * p + 1] = event_value(f2, s2, p, work, M, S.v_onset) if na == 2 else -1.0
+    best = 2.0
+    for p in range(npair):
+        if S.smooth[p]:
+            continue
+        na, f1, s1, f2, s2 = active_events(S.mode[p], M.pair_law[p], M.pair_par[p])
+        for a in range(na):
+            fn = f1 if a == 0 else f2
+            sg = s1 if a == 0 else s2
+            col = 2 * p + a
+            if vbuf[0, col] > 0.0:
+                best = 0.0  # inconsistent start: switch at once, no advance
+                continue
+            for k in range(1, N_SAMPLES + 1):
+                th_a = (k - 1) / N_SAMPLES
+                if th_a >= best:
+                    break
+                if vbuf[k, col] > 0.0:
+                    root = locate_root(fn, sg, p, th_a, k / N_SAMPLES, y0, q, h, M, S.v_onset, ytmp, tol)
+                    best = min(best, root)
+                    break
+            for k in range(N_SAMPLES + 1):
+                lo = max(k - 1, 0)
+                hi = min(k + 1, N_SAMPLES)
+                if lo / N_SAMPLES >= best:
+                    break
+                v = vbuf[k, col]
+                if v > 0.0 or v < vbuf[lo, col] or v < vbuf[hi, col]:
+                    continue
+                rise = (v - vbuf[lo, col]) + (v - vbuf[hi, col])
+                if v + 2.0 * rise <= 0.0:
+                    continue  # a local maximum far below zero: no graze here
+                th_m, vm = _max_on(fn, sg, p, lo / N_SAMPLES, hi / N_SAMPLES, y0, q, h, M, S.v_onset, work)
+                if vm > 0.0:
+                    root = locate_root(fn, sg, p, lo / N_SAMPLES, th_m, y0, q, h, M, S.v_onset, ytmp, tol)
+                    best = min(best, root)
+    if best <= 1.0:
+        return best, True
+    return 1.0, False
+
+
+@jit
 def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
     """Advance S to t_target (or until a buffer fills or max_steps). Returns a status code."""
     n = M.berry.shape[0]
@@ -268,6 +350,7 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
     fext = np.zeros((n, 2))
     tens = np.zeros(n)
     cls = np.zeros((N_SAMPLES + 1, max(npair, 1)), dtype=np.int64)
+    vbuf = np.zeros((N_SAMPLES + 1, 2 * max(npair, 1)))
     nbreak = X.breaks.shape[0]
     cap_out = B.t.shape[0]
     cap_imp = B.imp.shape[0]
@@ -349,32 +432,7 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
         theta_e = 1.0
         event = False
         if locate:
-            tol = max(ROOT_TOL, 8 * 2.2e-16 * abs(t0))
-            for k in range(1, N_SAMPLES + 1):
-                th = k / N_SAMPLES
-                dense(th, S.y, q, h, work)
-                best = 2.0
-                for p in range(npair):
-                    if S.smooth[p]:
-                        continue
-                    na, f1, s1, f2, s2 = active_events(S.mode[p], M.pair_law[p], M.pair_par[p])
-                    for a in range(na):
-                        fn = f1 if a == 0 else f2
-                        sg = s1 if a == 0 else s2
-                        if event_value(fn, sg, p, work, M, S.v_onset) > 0.0:
-                            th0 = (k - 1) / N_SAMPLES
-                            dense(th0, S.y, q, h, ytmp)
-                            if event_value(fn, sg, p, ytmp, M, S.v_onset) > 0.0:
-                                root = th0  # inconsistent start: switch at once, no advance
-                            else:
-                                root = locate_root(fn, sg, p, th0, th, S.y, q, h, M, S.v_onset, ytmp, tol)
-                            if root < best:
-                                best = root
-                            dense(th, S.y, q, h, work)
-                if best <= 1.0:
-                    theta_e = best
-                    event = True
-                    break
+            theta_e, event = find_event(S.y, q, h, t0, M, S, vbuf, ytmp, work)
         t_commit = t_new if not event or theta_e >= 1.0 else t0 + theta_e * h
         # --- grid output in (t0, t_commit]
         dt_out = S.fl[GRID_DT]

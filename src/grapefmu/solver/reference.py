@@ -2,7 +2,9 @@
 every contact switch. It shares only the right-hand side with the event-driven solver, so the
 two disagree if our stepping, event location or mode logic is wrong.
 
-Restart rules that keep it from stalling (research notes): the new mode comes from which
+scipy only sees an event function change sign between its step ends, so a contact (or a
+separation) shorter than a step goes unseen; the reference therefore caps its step at
+MAX_STEP. Restart rules that keep it from stalling (research notes): the new mode comes from which
 function crossed and in which direction, never from the sign of a gap that is ~0 at the
 restart, and each event function ignores the first 1e-12 s of a segment.
 """
@@ -25,6 +27,7 @@ from . import core
 TRANSITION = {(0, core.EV_DELTA): 1, (1, core.EV_DELTA): 0, (1, core.EV_PHI): 2, (2, core.EV_DELTA): 0,
               (2, core.EV_PHI): 1}
 MAX_SEGMENTS = 200_000
+MAX_STEP = 5e-4  # s: every switch that lasts longer than this is seen
 
 
 class _State:
@@ -52,14 +55,16 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     lay = layout(m.n_berries, len(m.couplings), len(m.pairs))
     npair = lay.p
     st = _State(npair)
+    rows, open_imp = [], {}
     y = np.zeros(lay.size)
     y[: 2 * lay.n] = scene.initial_state
     for p in range(npair):
-        st.mode[p] = core.classify(p, y, M, st.v_onset, 0)[0]
+        st.mode[p], ddot = core.classify(p, y, M, st.v_onset, 0)
+        if st.mode[p] != 0:
+            open_imp[p] = [0.0, ddot, 0.0, 0.0, 0.0, 0.0]
     breaks = [b for b in X.breaks if 0 < b < t_end] + [t_end]
     grid = np.linspace(0.0, t_end, int(round(t_end / dt_out)) + 1)
     out_t, out_y, out_mode, out_acc, out_vo = [], [], [], [], []
-    rows, open_imp = [], {}
     peak_force = np.zeros(npair)
     dy = np.zeros(lay.size)
     nfev = 0
@@ -94,7 +99,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
                 events.append(make_event(p, fn, sg, t))
                 labels.append((p, fn))
         sol = solve_ivp(f, (t, t_stop), y, method=integrator, rtol=rtol, atol=atol, dense_output=True,
-                        events=events or None)
+                        events=events or None, max_step=MAX_STEP)
         nfev += sol.nfev
         if sol.status < 0:
             raise SolverError(f"reference: solve_ivp failed at t = {sol.t[-1]:.6g} s: {sol.message}")

@@ -65,8 +65,21 @@ def _buffers(cap: int, ny: int, npair: int, cap_imp: int) -> Buffers:
 
 @jit
 def _initial_modes(S, M):
-    for p in range(S.mode.shape[0]):
-        S.mode[p] = core.classify(p, S.y, M, S.v_onset, 0)[0]
+    """Modes from the state; a pair that starts in contact opens an impact at the start time."""
+    n = M.berry.shape[0]
+    npair = S.mode.shape[0]
+    nc = M.coup_idx.shape[0]
+    for p in range(npair):
+        mode, ddot = core.classify(p, S.y, M, S.v_onset, 0)
+        S.mode[p] = mode
+        if mode != 0:
+            S.imp_open[p, core.O_ONSET] = S.fl[core.T]
+            S.imp_open[p, core.O_SPEED] = ddot
+            S.imp_open[p, core.O_PEAK] = 0.0
+            S.imp_open[p, core.O_TPEAK] = S.fl[core.T]
+            S.imp_open[p, core.O_J] = S.y[3 * n + nc + npair + p]
+            S.imp_open[p, core.O_D] = S.y[3 * n + nc + p]
+            S.it[core.N_IMPACTS] += 1
 
 
 STATUS_TEXT = {

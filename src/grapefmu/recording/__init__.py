@@ -1,0 +1,1 @@
+"""Recording runs to MCAP (profile ros2, ros2msg schemas, cdr encoding) with standard messages."""

@@ -1,0 +1,69 @@
+"""Write a run to CSV or Parquet. Every writer goes through a temporary file and a rename,
+so an interrupted write never leaves a half-written file under the requested name."""
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import GrapefmuError
+from .run import Run
+
+CSV_CORE = ("time", "angle_", "angular_velocity_", "pedicel_force_", "contact_force_", "penetration_")
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path beside `path`; move it into place only if the block succeeds."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+
+
+def write_csv(run: Run, path: str | Path) -> None:
+    """The CSV columns the issue names (time, angles, rates, pedicel and contact forces, penetration)
+    followed by positions, base acceleration and the energy ledger."""
+    cols = run.columns()
+    names = list(cols)
+    data = np.column_stack([cols[k] for k in names])
+    with atomic_path(path) as tmp:
+        np.savetxt(tmp, data, delimiter=",", header=",".join(names), comments="", fmt="%.12g")
+
+
+def write_parquet(run: Run, path: str | Path) -> None:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    cols = run.columns()
+    meta = {"grapefmu.scene": run.scene.source, "grapefmu.summary": json.dumps(run.summary(), default=str)}
+    table = pa.table({k: pa.array(v) for k, v in cols.items()}).replace_schema_metadata(meta)
+    with atomic_path(path) as tmp:
+        pq.write_table(table, tmp)
+
+
+def write_run(run: Run, path: str | Path) -> None:
+    suffix = Path(path).suffix.lower()
+    if suffix == ".csv":
+        write_csv(run, path)
+    elif suffix == ".parquet":
+        write_parquet(run, path)
+    elif suffix == ".mcap":
+        from ..recording.mcap_writer import write_mcap
+        write_mcap(run, path)
+    else:
+        raise GrapefmuError(f"--out: unknown file type {suffix!r}; use .csv, .parquet or .mcap")

@@ -1,0 +1,61 @@
+"""Every bad value gives one clear error naming the key and the allowed range."""
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import pytest
+
+from grapefmu import SceneError
+from grapefmu.model import parse_scene
+
+from .conftest import dual, scene
+
+
+@pytest.mark.parametrize("mutate, key, words", [
+    (lambda d: d["berries"][0].update(mass=-0.01), "berries[0].mass", "(0, 10] kg"),
+    (lambda d: d["berries"][0].update(mass="heavy"), "berries[0].mass", "got str"),
+    (lambda d: d["berries"][1].update(radius=0.05), "berries[1].radius", "smaller than twig_length"),
+    (lambda d: d["berries"][0].update(angle=math.nan), "berries[0].angle", "[-3.14159, 3.14159] rad"),
+    (lambda d: d["berries"][0].update(colour="red"), "berries[0].colour", "unknown key"),
+    (lambda d: d["berries"][1].update(hinge_x=0.0), "berries[1].hinge_x", "overlap"),
+    (lambda d: (d["berries"][0].update(angle=0.0), d["berries"][1].update(angle=-0.5)), "berries[1].angle", "overlap"),
+    (lambda d: d["contact"].update(law="rubber"), "contact.law", "'kelvin-voigt'"),
+    (lambda d: d["contact"].update(damping=1.0), "contact.restitution", "not both"),
+    (lambda d: d["contact"].update(restitution=1.5), "contact.restitution", "(0, 1]"),
+    (lambda d: d.update(solver={"rtol": 0.0}), "solver.rtol", "[1e-14, 0.1]"),
+    (lambda d: d.update(solver={"method": "euler"}), "solver.method", "'event'"),
+    (lambda d: d.update(excitation={"kind": "sine", "amplitude": [1.0, math.inf], "frequency": 5.0}),
+     "excitation.amplitude[1]", "m/s²"),
+    (lambda d: d.update(excitation={"kind": "csv", "file": "missing.csv"}), "excitation.file", "cannot read"),
+    (lambda d: d.update(gravity=-9.81), "gravity", "[0, 100]"),
+    (lambda d: d.update(thresholds={"bruise_force": 0}), "thresholds.bruise_force", "(0, 10000] N"),
+    (lambda d: d.update(berries=[]), "berries", "at least one"),
+])
+def test_bad_value_is_named(mutate, key, words):
+    doc = dual()
+    mutate(doc)
+    with pytest.raises(SceneError) as ei:
+        scene(doc)
+    assert ei.value.key == key
+    assert words in str(ei.value)
+
+
+def test_invalid_toml_and_nan_in_toml():
+    with pytest.raises(SceneError, match="not valid TOML"):
+        parse_scene("berries = [")
+    text = ('[[berries]]\nname="a"\nmass=nan\nradius=0.01\ntwig_length=0.03\nhinge_x=0.0\n')
+    with pytest.raises(SceneError, match=r"berries\[0\]\.mass"):
+        parse_scene(text)
+
+
+def test_cli_reports_bad_scene_without_traceback(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[[berries]]\nname="a"\nmass=-1\nradius=0.01\ntwig_length=0.03\nhinge_x=0.0\n')
+    out = tmp_path / "run.csv"
+    r = subprocess.run([sys.executable, "-m", "grapefmu", "simulate", str(bad), "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2
+    assert "berries[0].mass" in r.stderr and "Traceback" not in r.stderr
+    assert not out.exists()
