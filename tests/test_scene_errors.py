@@ -59,3 +59,11 @@ def test_cli_reports_bad_scene_without_traceback(tmp_path):
     assert r.returncode == 2
     assert "berries[0].mass" in r.stderr and "Traceback" not in r.stderr
     assert not out.exists()
+
+
+def test_scene_built_in_code_carries_toml_that_loads_back_to_the_same_model():
+    sc = scene(dual(excitation={"kind": "pick-and-place", "moves": [{"displacement": [0.2, 0.1], "duration": 0.5}]},
+                    coupling={"stiffness": 1.0}))
+    again = parse_scene(sc.source)
+    assert again.model == sc.model and again.angles == sc.angles
+    assert (again.excitation.arrays.table == sc.excitation.arrays.table).all()

@@ -68,6 +68,9 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)
     thresholds = _thresholds(doc.get("thresholds", {}))
     _check_overlap(model, angles, names)
+    if not source:
+        from .toml_out import dumps
+        source = dumps({"name": name, **{k: v for k, v in doc.items() if k != "name"}})
     return Scene(model, tuple(angles), tuple(rates), excitation, solver, thresholds, source, name)
 
 

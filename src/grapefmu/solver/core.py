@@ -17,9 +17,9 @@ from ..physics.dynamics import (HC, HC_MIN_APPROACH_SPEED, KV, base_accel, berry
                                 pair_force, pair_kinematics, pedicel_tension, rhs)
 
 # float slots of S.fl
-T, H, T_PREV, H_LAST, GRID_T0, GRID_DT = range(6)
+T, H, T_PREV, H_LAST, GRID_T0, GRID_DT, HELD_AX, HELD_AY = range(8)
 # int slots of S.it
-N_STEPS, N_REJECTED, N_RHS, N_SWITCHES, N_IMPACTS, N_ZENO, BREAK_IDX, GRID_K, N_OUT, N_IMP, STATUS = range(11)
+N_STEPS, N_REJECTED, N_RHS, N_SWITCHES, N_IMPACTS, N_ZENO, BREAK_IDX, GRID_K, N_OUT, N_IMP, STATUS, HELD = range(12)
 # slots of cfg
 RTOL, ATOL, FIXED, ZENO_WIN, LOCATE, HMAX = range(6)
 # statuses

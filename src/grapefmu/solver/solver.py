@@ -82,6 +82,11 @@ def _initial_modes(S, M):
             S.it[core.N_IMPACTS] += 1
 
 
+def _held_input(S: SolverState) -> tuple[float, float] | None:
+    """The held (zero-order-hold) input, kept in the state so that set_state restores it too."""
+    return (float(S.fl[core.HELD_AX]), float(S.fl[core.HELD_AY])) if S.it[core.HELD] else None
+
+
 STATUS_TEXT = {
     core.MAX_STEPS: "the step limit was reached",
     core.STEP_UNDERFLOW: "the step size fell below the resolution of time (the problem is too stiff for this tolerance)",
@@ -110,7 +115,6 @@ class Solver:
         self.layout = layout(self.model.n_berries, len(self.model.couplings), len(self.model.pairs))
         self.cfg = np.array([self.rtol, self.atol, self.fixed_step, s.zeno_window,
                              1.0 if self.method == "event" else 0.0, math.inf])
-        self._held: tuple[float, float] | None = None
         self.state = self._fresh_state(scene.initial_state, s.zeno_max_events)
         self._scratch = _buffers(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
 
@@ -131,11 +135,21 @@ class Solver:
         self._refresh_derivative(S)
         return S
 
-    def _inputs(self) -> ExcitationArrays:
-        return self.excitation if self._held is None else constant(*self._held).arrays
+    @property
+    def _held(self) -> tuple[float, float] | None:
+        return _held_input(self.state)
+
+    def _hold(self, held: tuple[float, float] | None) -> None:
+        S = self.state
+        S.it[core.HELD] = held is not None
+        S.fl[core.HELD_AX], S.fl[core.HELD_AY] = held if held is not None else (0.0, 0.0)
+
+    def _inputs(self, S: SolverState | None = None) -> ExcitationArrays:
+        held = _held_input(self.state if S is None else S)
+        return self.excitation if held is None else constant(*held).arrays
 
     def _refresh_derivative(self, S: SolverState) -> None:
-        X = self._inputs()
+        X = self._inputs(S)
         t = S.fl[core.T]
         rhs(t, t, S.y, S.f, S.mode, S.v_onset, S.smooth, self.M, X.kind, X.par, X.table)
 
@@ -216,9 +230,8 @@ class Solver:
         else:
             held = None
         before = self.state.copy()
-        held_before = self._held
         if held != self._held:
-            self._held = held
+            self._hold(held)
             self._refresh_derivative(self.state)
         self.state.it[core.N_IMP] = 0
         self.state.fl[core.GRID_DT] = 0.0
@@ -229,7 +242,6 @@ class Solver:
                 break
             self.state.it[core.N_IMP] = 0
         if status != core.DONE:
-            self._held = held_before
             self._fail(status, before)
 
     def _fail(self, status: int, before: SolverState) -> None:

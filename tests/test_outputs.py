@@ -1,0 +1,76 @@
+"""What a run writes, read back by independent readers (numpy, pyarrow, rosbags, mcap-ros2-support)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grapefmu import simulate
+from grapefmu.results.writers import write_run
+
+from .conftest import dual, scene
+
+
+@pytest.fixture(scope="module")
+def run():
+    return simulate(scene(dual(solver={"t_end": 0.5})))
+
+
+def test_csv_has_the_named_columns_and_values(run, tmp_path):
+    path = tmp_path / "run.csv"
+    write_run(run, path)
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    for col in ("time", "angle_left", "angle_right", "angular_velocity_left", "pedicel_force_right",
+                "contact_force_left_right", "penetration_left_right"):
+        assert col in data.dtype.names
+    np.testing.assert_allclose(data["angle_right"], run.angles[:, 1], rtol=1e-11, atol=1e-14)
+    np.testing.assert_allclose(data["contact_force_left_right"], run.contact_force[:, 0], rtol=1e-11, atol=1e-14)
+    assert data["contact_force_left_right"].max() > 0
+
+
+def test_parquet_roundtrip_keeps_the_scene(run, tmp_path):
+    import pyarrow.parquet as pq
+    path = tmp_path / "run.parquet"
+    write_run(run, path)
+    table = pq.read_table(path)
+    np.testing.assert_array_equal(table.column("angle_left").to_numpy(), run.angles[:, 0])
+    assert tomllib.loads(table.schema.metadata[b"grapefmu.scene"].decode()) is not None
+
+
+def test_mcap_reads_back_in_rosbags_and_mcap_ros2(run, tmp_path):
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.highlevel import AnyReader
+
+    path = tmp_path / "run.mcap"
+    write_run(run, path)
+    with AnyReader([path]) as r:
+        counts = {c.topic: c.msgcount for c in r.connections}
+        assert counts["joint_states"] == len(run.t)
+        assert counts["collision_events"] == run.collision_count
+        js = [c for c in r.connections if c.topic == "joint_states"]
+        positions = np.array([r.deserialize(raw, c.msgtype).position for c, _, raw in r.messages(connections=js)])
+        np.testing.assert_array_equal(positions, run.angles)
+        ev = [c for c in r.connections if c.topic == "collision_events"]
+        peaks = [r.deserialize(raw, c.msgtype).data[6] for c, _, raw in r.messages(connections=ev)]
+        np.testing.assert_allclose(sorted(peaks), sorted(run.impacts.peak_force))
+    with open(path, "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+        assert tomllib.loads(meta["grapefmu"]["scene_toml"])["berries"][0]["name"] == "left"
+        efforts = [m.effort for _, _, _, m in reader.iter_decoded_messages(topics=["joint_states"])]
+        assert len(efforts) == len(run.t) and all(len(e) == 2 for e in efforts)
+
+
+def test_main_command_writes_plot_and_mcap(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "grapefmu", "simulate", "--plot", str(tmp_path / "d.png"),
+                        "--out", str(tmp_path / "d.mcap")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "collisions" in r.stdout and "peak contact force" in r.stdout
+    assert (tmp_path / "d.png").stat().st_size > 20_000
+    assert (tmp_path / "d.mcap").stat().st_size > 10_000
+    assert not list(Path(tmp_path).glob(".*.part"))
