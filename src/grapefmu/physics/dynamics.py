@@ -18,10 +18,12 @@ from ..model.contact import HC_MIN_APPROACH_SPEED  # noqa: F401  (re-exported fo
 
 KV, HERTZ, HC = 0, 1, 2
 CONSTANT, CHIRP, TABLE = 0, 1, 2
-jit = nb.njit(cache=True, fastmath=False, error_model="numpy")
+jit = nb.njit(cache=True, error_model="numpy")
+#: small helpers are inlined into their callers: a call boundary costs more than their arithmetic
+inline = nb.njit(cache=True, error_model="numpy", inline="always")
 
 
-@jit
+@inline
 def base_accel(kind, par, tab, t, t_ref):
     """a(t) on the smooth piece that contains t_ref (the step's start), so that a step ending
     exactly on a breakpoint still sees the acceleration of the piece it integrated."""
@@ -43,7 +45,7 @@ def base_accel(kind, par, tab, t, t_ref):
     return tab[k, 1] + u * (tab[k + 1, 1] - tab[k, 1]), tab[k, 2] + u * (tab[k + 1, 2] - tab[k, 2])
 
 
-@jit
+@inline
 def pair_kinematics(y, berry, i, j, n):
     """Penetration δ = r_i + r_j − |p_j − p_i|, its rate δ̇ and the unit normal n from i to j."""
     qi, qj = y[i], y[j]
@@ -64,7 +66,7 @@ def pair_kinematics(y, berry, i, j, n):
     return delta, delta_dot, nx, ny
 
 
-@jit
+@inline
 def contact_law(code, par, delta, delta_dot, v_onset):
     """(F, F_el, φ): the unclamped force, its elastic part and the sign function φ whose
     zero is where the clamped law unloads (φ ≡ 1 where the law cannot pull)."""
@@ -83,7 +85,7 @@ def contact_law(code, par, delta, delta_dot, v_onset):
     return f_el * phi, f_el, (phi if clamp else 1.0)
 
 
-@jit
+@inline
 def elastic_energy(code, par, delta):
     if delta <= 0.0:
         return 0.0
@@ -92,7 +94,7 @@ def elastic_energy(code, par, delta):
     return 0.4 * par[0] * delta * delta * math.sqrt(delta)
 
 
-@jit
+@inline
 def pair_force(p, y, mode, v_onset, smooth, M):
     """Normal force the pair pushes with in its current mode, and the dissipation power."""
     if mode[p] == 0 and not smooth[p]:

@@ -11,10 +11,15 @@ from __future__ import annotations
 
 import math
 
+import numba as nb
 import numpy as np
 
 from ..physics.dynamics import (HC, HC_MIN_APPROACH_SPEED, KV, base_accel, berry_forces, contact_law, jit,
                                 pair_force, pair_kinematics, pedicel_tension, rhs)
+
+#: the right-hand side inlined into the stage loop only: a compiled call passing a dozen arrays costs
+#: more in reference counting than two berries' arithmetic, and inlining it everywhere doubles compile time
+rhs_stage = nb.njit(cache=True, error_model="numpy", inline="always")(rhs.py_func)
 
 # float slots of S.fl
 T, H, T_PREV, H_LAST, GRID_T0, GRID_DT, HELD_AX, HELD_AY = range(8)
@@ -31,7 +36,7 @@ IMPACT_COLUMNS = 9
 O_ONSET, O_SPEED, O_PEAK, O_TPEAK, O_J, O_D = range(6)
 # contact event functions
 EV_DELTA, EV_PHI = 0, 1
-N_SAMPLES = 8          # dense-output samples per step searched for a sign change
+N_SAMPLES = 4          # sub-intervals per step searched for a sign change (plus local-maximum refinement)
 ROOT_TOL = 1e-13       # s, absolute tolerance of event times
 
 
@@ -205,7 +210,8 @@ def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pbuf, fext, tens, 
             if tens[i] > S.peak_tension[i]:
                 S.peak_tension[i] = tens[i]
         for p in range(npair):
-            cls[k, p] = classify(p, work, M, S.v_onset, S.mode[p])[0]
+            if S.smooth[p]:
+                cls[k, p] = classify(p, work, M, S.v_onset, S.mode[p])[0]
     for p in range(npair):
         if S.mode[p] == 0 and not S.smooth[p]:
             continue
@@ -215,7 +221,14 @@ def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pbuf, fext, tens, 
                 kbest = k
         fbest = fbuf[kbest, p]
         tbest = theta_end * kbest / N_SAMPLES
-        if fbest > 0.0 and fbest >= S.imp_open[p, O_PEAK]:
+        turning = 0 < kbest < N_SAMPLES
+        if not turning and fbest > 0.0 and fbest >= S.imp_open[p, O_PEAK]:
+            # a maximum at a step end is a peak only if the force already falls there
+            eps = 1e-3 / N_SAMPLES
+            th_in = theta_end * (1.0 - eps) if kbest == N_SAMPLES else theta_end * eps
+            dense(th_in, y0, q, h, work)
+            turning = pair_force(p, work, S.mode, S.v_onset, S.smooth, M)[0] > fbest
+        if turning and fbest > 0.0 and fbest >= S.imp_open[p, O_PEAK]:
             # golden-section search between the neighbouring samples (one-sided at the step's ends,
             # where the peak may sit just inside this step)
             a = theta_end * max(kbest - 1, 0) / N_SAMPLES
@@ -389,13 +402,13 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
                 for m in range(st):
                     acc += TB.a[st, m] * stages[m, r]
                 ytmp[r] = S.y[r] + h * acc
-            rhs(t0 + TB.c[st] * h, t0, ytmp, stages[st], S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
+            rhs_stage(t0 + TB.c[st] * h, t0, ytmp, stages[st], S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
         for r in range(ny):
             acc = 0.0
             for m in range(ns):
                 acc += TB.b[m] * stages[m, r]
             ynew[r] = S.y[r] + h * acc
-        rhs(t_new, t0, ynew, stages[ns], S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
+        rhs_stage(t_new, t0, ynew, stages[ns], S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
         S.it[N_RHS] += ns
         finite = True
         for r in range(ny):
