@@ -85,6 +85,16 @@ def cmd_paper(a: argparse.Namespace) -> int:
     return reproduce(Path(a.out))
 
 
+def cmd_build_fmu(a: argparse.Namespace) -> int:
+    try:
+        from grapefmu_fmu.build import build_fmu
+    except ImportError as e:
+        raise GrapefmuError(f"build-fmu needs the FMU extra (pip install 'grapefmu[fmu]'): {e}") from None
+    out = build_fmu(a.scene or default_scene_path(), a.output, a.fmi)
+    print(f"wrote {out} (FMI {a.fmi}.0 co-simulation)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="grapefmu", description="Berries that swing and collide when a gripper moves a grape cluster.")
     ap.add_argument("--version", action="version", version=f"grapefmu {__version__}")
@@ -98,6 +108,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", help="write samples to .csv, .parquet or .mcap")
     s.add_argument("--plot", help="write a figure (.png, .pdf or .svg)")
     s.set_defaults(func=cmd_simulate)
+    b = sub.add_parser("build-fmu", help="package a scene as an FMI co-simulation FMU")
+    b.add_argument("scene", nargs="?", help="scene TOML (default: the packaged default scene)")
+    b.add_argument("-o", "--output", required=True, help="the .fmu file to write")
+    b.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
+    b.set_defaults(func=cmd_build_fmu)
     p = sub.add_parser("paper", help="reproduce tests 1–9 of Xu et al. (2025) and check each claim")
     p.add_argument("--out", default="out/paper", help="directory for figures and the claims report")
     p.set_defaults(func=cmd_paper)

@@ -129,8 +129,9 @@ def pick_and_place(moves: list[tuple[tuple[float, float], float]], start: float 
     return table("pick-and-place", np.array(rows), desc)
 
 
-def read_csv(path: Path, key: str) -> Excitation:
-    """A CSV of time, ax, ay (header row allowed); linear in between, zero outside."""
+def read_csv(path: Path, key: str, hold: bool = False) -> Excitation:
+    """A CSV of time, ax, ay (header row allowed); linear in between (or held from each row to the
+    next with hold = true, as a sampled controller output is), zero outside."""
     try:
         with open(path, newline="") as fh:
             raw = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
@@ -153,7 +154,21 @@ def read_csv(path: Path, key: str) -> Excitation:
         raise SceneError(key, f"{path}: time must increase strictly from row to row")
     if arr[0, 0] < 0:
         raise SceneError(key, f"{path}: time must start at or after 0 s")
-    return table("csv", arr, f"csv: {path.name}, {len(arr)} rows")
+    if hold:
+        arr = zero_order_hold(arr)
+    return table("csv", arr, f"csv: {path.name}, {len(rows)} rows{' (held)' if hold else ''}")
+
+
+def zero_order_hold(rows: np.ndarray) -> np.ndarray:
+    """A staircase as a piecewise-linear table: each value repeated at the next row's time.
+    The solver picks the piece from the step's start, so the duplicated knot is never ambiguous."""
+    t, a = rows[:, 0], rows[:, 1:]
+    out = np.empty((2 * len(rows) - 1, 3))
+    out[0::2, 0] = t
+    out[0::2, 1:] = a
+    out[1::2, 0] = t[1:]
+    out[1::2, 1:] = a[:-1]
+    return out
 
 
 def _is_number(s: str) -> bool:

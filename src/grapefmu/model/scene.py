@@ -30,7 +30,7 @@ EXCITATION_KEYS = {
     "sine": {"kind", "amplitude", "frequency", "start", "duration"},
     "sweep": {"kind", "amplitude", "f_start", "f_stop", "start", "duration"},
     "pick-and-place": {"kind", "moves", "start", "jerk_fraction"},
-    "csv": {"kind", "file"},
+    "csv": {"kind", "file", "hold"},
 }
 SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events"}
 THRESHOLD_KEYS = {"detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction"}
@@ -214,7 +214,7 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
         f = raw.get("file")
         if not isinstance(f, str):
             raise SceneError(f"{key}.file", f"expected a path to a CSV of time, ax, ay, got {f!r}")
-        ex = exc.read_csv(base_dir / f, f"{key}.file")
+        ex = exc.read_csv(base_dir / f, f"{key}.file", v.boolean(f"{key}.hold", raw.get("hold", False)))
         if abs(ex.arrays.table[:, 1:]).max() > acc:
             raise SceneError(f"{key}.file", f"accelerations must stay within ±{acc:g} m/s²")
         return ex

@@ -41,7 +41,8 @@ def base_accel(kind, par, tab, t, t_ref):
     if t_ref < tab[0, 0] or t_ref >= tab[n - 1, 0]:
         return 0.0, 0.0
     k = np.searchsorted(tab[:, 0], t_ref, side="right") - 1
-    u = (t - tab[k, 0]) / (tab[k + 1, 0] - tab[k, 0])
+    span = tab[k + 1, 0] - tab[k, 0]
+    u = (t - tab[k, 0]) / span if span > 0.0 else 0.0
     return tab[k, 1] + u * (tab[k + 1, 1] - tab[k, 1]), tab[k, 2] + u * (tab[k + 1, 2] - tab[k, 2])
 
 

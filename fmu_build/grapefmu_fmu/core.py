@@ -1,0 +1,191 @@
+"""What the FMU does, independent of the FMI version and of pythonfmu.
+
+Parameters are collected as numbers, turned into a scene and validated by grapefmu's own scene
+checks when initialization ends; each do_step integrates the whole communication step with the
+event-driven solver (so results do not depend on the master's step) and refuses, leaving the state
+untouched, anything it cannot integrate."""
+from __future__ import annotations
+
+import copy
+import io
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from grapefmu import GrapefmuError, Solver
+from grapefmu.model.contact import LAWS
+from grapefmu.model.scene import parse_scene, scene_from_dict
+from grapefmu.physics.dynamics import berry_forces, pedicel_tension
+from grapefmu.solver import core
+from grapefmu.solver.solver import SolverState
+
+from .variables import Var, pair_suffix, variables
+
+MAX_INPUT = 1e3  # m/s², the scene validator's bound on accelerations
+
+
+class FmuCore:
+    def __init__(self, scene_path: str | Path):
+        scene_path = Path(scene_path)
+        self.base_dir = scene_path.parent
+        self.doc = tomllib.loads(scene_path.read_text())
+        self.scene = parse_scene(scene_path.read_text(), base_dir=self.base_dir, name=scene_path.stem)
+        self.model = self.scene.model
+        self.vars: list[Var] = variables(self.model)
+        self.values: dict[str, float | int | bool] = self._start_values()
+        self.solver: Solver | None = None
+        self.error: str | None = None
+
+    # --- values -----------------------------------------------------------------------------------
+    def _start_values(self) -> dict:
+        m, sc = self.model, self.scene
+        val: dict = {"base_ax": 0.0, "base_ay": 0.0}
+        for i, b in enumerate(m.berries):
+            val.update({f"angle_{b.name}": sc.angles[i], f"angular_velocity_{b.name}": sc.angular_velocities[i],
+                        f"pedicel_force_{b.name}": 0.0, f"mass_{b.name}": b.mass, f"radius_{b.name}": b.radius,
+                        f"twig_length_{b.name}": b.twig_length, f"hinge_x_{b.name}": b.hinge_x,
+                        f"hinge_stiffness_{b.name}": b.hinge_stiffness, f"hinge_damping_{b.name}": b.hinge_damping})
+        for p in range(len(m.pairs)):
+            s = pair_suffix(m, p)
+            val.update({f"contact_force{s}": 0.0, f"penetration{s}": 0.0, f"in_contact{s}": False})
+        law = m.pairs[0].law if m.pairs else None
+        cp = m.couplings[0] if m.couplings else None
+        val.update({"collision_count": 0, "peak_contact_force": 0.0, "dissipated_energy": 0.0, "detachment_risk": False,
+                    "coupling_stiffness": cp.stiffness if cp else 0.0, "coupling_damping": cp.damping if cp else 0.0,
+                    "contact_law": law.code if law else 0, "contact_stiffness": law.stiffness if law else 2000.0,
+                    "contact_damping": law.damping if law else 0.0,
+                    "restitution": (law.restitution or 0.0) if law else 0.0,
+                    "gravity": m.gravity, "rtol": sc.solver.rtol})
+        return val
+
+    def scene_from_parameters(self):
+        """The scene the parameter values describe, checked by the same validator as a TOML file."""
+        v = self.values
+        doc = copy.deepcopy(self.doc)
+        doc.pop("excitation", None)  # the inputs drive the rachis
+        for b in doc["berries"]:
+            n = b["name"]
+            for key in ("mass", "radius", "twig_length", "hinge_x", "hinge_stiffness", "hinge_damping"):
+                b[key] = v[f"{key}_{n}"]
+            b["angle"] = v[f"angle_{n}"]
+            b["angular_velocity"] = v[f"angular_velocity_{n}"]
+        if "contact" in doc:
+            code = v["contact_law"]
+            if not (isinstance(code, int) and 0 <= code < len(LAWS)):
+                raise GrapefmuError(f"contact_law: expected 0, 1 or 2, got {code!r}")
+            c = {k: doc["contact"][k] for k in ("pairs", "allow_tension") if k in doc["contact"]}
+            c.update(law=LAWS[code], stiffness=v["contact_stiffness"])
+            if LAWS[code] != "hertz":
+                if v["restitution"] > 0:
+                    c["restitution"] = v["restitution"]
+                else:
+                    c["damping"] = v["contact_damping"]
+            doc["contact"] = c
+        if v["coupling_stiffness"] or v["coupling_damping"]:
+            pairs = doc.get("coupling", {}).get("pairs")
+            doc["coupling"] = {"stiffness": v["coupling_stiffness"], "damping": v["coupling_damping"],
+                               **({"pairs": pairs} if pairs else {})}
+        else:
+            doc.pop("coupling", None)
+        doc["gravity"] = v["gravity"]
+        doc.setdefault("solver", {})["rtol"] = v["rtol"]
+        doc["solver"]["atol"] = min(doc["solver"].get("atol", 1e-10), v["rtol"] * 1e-2) if v["rtol"] > 0 else 1e-10
+        doc["solver"]["method"] = "event"
+        return scene_from_dict(doc, self.base_dir, name=self.scene.name)
+
+    def initialize(self, start_time: float = 0.0) -> str | None:
+        """Build the solver from the parameters; returns an error message instead of raising."""
+        try:
+            self.scene = self.scene_from_parameters()
+            self.solver = Solver(self.scene)
+            self.solver.state.fl[core.T] = start_time
+            self.error = None
+            self._update_outputs()
+        except GrapefmuError as e:
+            self.solver = None
+            self.error = f"initialization refused: {e}"
+        return self.error
+
+    # --- stepping ---------------------------------------------------------------------------------
+    def step(self, t: float, dt: float) -> str | None:
+        """Integrate [t, t + dt] with the inputs held. Returns an error message (state unchanged) or None."""
+        if self.solver is None:
+            return self.error or "do_step before initialization"
+        if not (math.isfinite(dt) and dt > 0):
+            return f"communication step: expected a finite step > 0 s, got {dt!r}"
+        if abs(t - self.solver.t) > 1e-9 * max(1.0, abs(t)):
+            return f"currentCommunicationPoint {t!r} s does not continue from the FMU's time {self.solver.t!r} s"
+        for name in ("base_ax", "base_ay"):
+            a = self.values[name]
+            if not (isinstance(a, (int, float)) and math.isfinite(a) and abs(a) <= MAX_INPUT):
+                return f"input {name} = {a!r}: expected a finite acceleration within ±{MAX_INPUT:g} m/s²; step refused"
+        try:
+            self.solver.advance(dt, (float(self.values["base_ax"]), float(self.values["base_ay"])))
+        except GrapefmuError as e:
+            return f"step [{t:.9g}, {t + dt:.9g}] s refused: {e}"
+        self._update_outputs()
+        return None
+
+    def _update_outputs(self) -> None:
+        s, m, v = self.solver, self.model, self.values
+        S = s.state
+        lay = s.layout
+        npair = max(len(m.pairs), 1)
+        force, pen, fext, tens = np.zeros(npair), np.zeros(npair), np.zeros((m.n_berries, 2)), np.zeros(m.n_berries)
+        berry_forces(S.y, S.mode, S.v_onset, S.smooth, s.M, force, pen, fext)
+        held = s._held or (0.0, 0.0)
+        pedicel_tension(S.y, held[0], held[1], fext, s.M, tens)
+        for i, b in enumerate(m.names):
+            v[f"angle_{b}"] = float(S.y[i])
+            v[f"angular_velocity_{b}"] = float(S.y[lay.n + i])
+            v[f"pedicel_force_{b}"] = float(tens[i])
+        for p in range(len(m.pairs)):
+            sfx = pair_suffix(m, p)
+            v[f"contact_force{sfx}"] = float(force[p])
+            v[f"penetration{sfx}"] = float(pen[p])
+            v[f"in_contact{sfx}"] = bool(S.mode[p] != 0)
+        v["collision_count"] = int(S.it[core.N_IMPACTS])
+        v["peak_contact_force"] = float(S.peak_force.max()) if len(m.pairs) else 0.0
+        v["dissipated_energy"] = float(S.y[lay.d_hinge].sum() + S.y[lay.d_coupling].sum() + S.y[lay.d_contact].sum())
+        peak_t = max(float(S.peak_tension.max()), float(tens.max()))
+        v["detachment_risk"] = bool(peak_t > self.scene.thresholds.detachment_force)
+
+    # --- FMU state --------------------------------------------------------------------------------
+    def get_state(self) -> dict:
+        return {"values": dict(self.values), "solver": self.solver.get_state() if self.solver else None,
+                "error": self.error}
+
+    def set_state(self, state: dict) -> None:
+        self.values.clear()  # in place: the FMI variables' getters and setters hold this dict
+        self.values.update(state["values"])
+        self.error = state["error"]
+        if state["solver"] is not None:
+            if self.solver is None:
+                self.solver = Solver(self.scene_from_parameters())
+            self.solver.set_state(state["solver"])
+
+    @staticmethod
+    def state_to_bytes(state: dict) -> bytes:
+        """npz without pickles: a serialized state can be stored and read back safely."""
+        arrays = {}
+        if state["solver"] is not None:
+            arrays.update({f"solver.{k}": a for k, a in zip(SolverState._fields, state["solver"])})
+        names = sorted(state["values"])
+        arrays["value_names"] = np.array(names)
+        arrays["value_data"] = np.array([float(state["values"][k]) for k in names])
+        arrays["value_kind"] = np.array([type(state["values"][k]).__name__ for k in names])
+        arrays["error"] = np.array(state["error"] or "")
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        return buf.getvalue()
+
+    @staticmethod
+    def state_from_bytes(data: bytes) -> dict:
+        z = np.load(io.BytesIO(bytes(data)), allow_pickle=False)
+        cast = {"bool": bool, "int": int, "float": float}
+        values = {str(n): cast[str(k)](x) for n, x, k in zip(z["value_names"], z["value_data"], z["value_kind"])}
+        solver = (SolverState(*(z[f"solver.{k}"].copy() for k in SolverState._fields))
+                  if "solver.y" in z.files else None)
+        return {"values": values, "solver": solver, "error": str(z["error"]) or None}

@@ -1,0 +1,94 @@
+"""FMI 3.0 co-simulation slave (pythonfmu3), with units on every variable and the `time`
+independent variable. A refused step returns fmi3Error with a logged message, never Fatal."""
+from __future__ import annotations
+
+from pathlib import Path
+from xml.etree.ElementTree import Element
+
+from pythonfmu3 import Boolean, Fmi3Causality, Fmi3Initial, Fmi3Slave, Fmi3Status, Fmi3Variability, Float64, Int32
+from pythonfmu3.fmi3slave import Fmi3StepResult
+from pythonfmu3.unit import Unit
+
+from grapefmu import __version__
+
+from .core import FmuCore
+from .units import BASE_UNITS
+
+TYPES = {"real": Float64, "integer": Int32, "boolean": Boolean}
+
+
+class _UnitWithoutBase(Unit):
+    """A unit whose SI exponents are not whole numbers (N/m^1.5): FMI allows leaving BaseUnit out."""
+
+    def to_xml(self):
+        return Element(self.tag, {"name": self.name})
+
+
+class GrapeFmi3Slave(Fmi3Slave):
+    scene_file = "scene.toml"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.core = FmuCore(Path(kwargs.get("resources") or ".") / self.scene_file)
+        self.description = (f"grapefmu {__version__}: berries on hinged twigs that swing and collide under "
+                            f"base excitation; scene '{self.core.scene.name}'")
+        self.author = "grapefmu"
+        self.version = __version__
+        self.start_time = 0.0
+        self.time = 0.0
+        units = {v.unit for v in self.core.vars if v.unit not in ("", "1")} | {"s"}
+        self.register_units([Unit(u, **BASE_UNITS[u]) if BASE_UNITS.get(u) is not None else _UnitWithoutBase(u)
+                             for u in sorted(units)])
+        self.register_variable(Float64("time", causality=Fmi3Causality.independent,
+                                       variability=Fmi3Variability.continuous, unit="s",
+                                       description="Simulation time"))
+        for var in self.core.vars:
+            self._register(var)
+
+    def _register(self, var):
+        values = self.core.values
+        kw = {"description": var.description,
+              "getter": lambda n=var.name: values[n],
+              "setter": lambda x, n=var.name: values.__setitem__(n, x)}
+        if var.type == "real" and var.unit not in ("", "1"):
+            kw["unit"] = var.unit
+        cont = Fmi3Variability.continuous if var.type == "real" else Fmi3Variability.discrete
+        if var.causality == "input":
+            kw.update(causality=Fmi3Causality.input, variability=cont)
+        elif var.causality == "output":
+            kw.update(causality=Fmi3Causality.output, variability=cont, initial=Fmi3Initial.exact)
+        else:
+            kw.update(causality=Fmi3Causality.parameter, variability=Fmi3Variability.fixed,
+                      initial=Fmi3Initial.exact)
+        self.register_variable(TYPES[var.type](var.name, **kw))
+
+    def enter_initialization_mode(self):
+        pass
+
+    def exit_initialization_mode(self):
+        err = self.core.initialize(self.start_time)
+        if err:
+            self.log(err, Fmi3Status.error)
+
+    def do_step(self, current_time, step_size):
+        err = self.core.step(current_time, step_size)
+        if err:
+            self.log(err, Fmi3Status.error)
+            return Fmi3StepResult(status=Fmi3Status.error)
+        self.time = current_time + step_size
+        return Fmi3StepResult()
+
+    def _get_fmu_state(self):
+        return self.core.get_state() | {"time": self.time}
+
+    def _set_fmu_state(self, state):
+        self.time = state.get("time", self.time)
+        self.core.set_state(state)
+
+    @staticmethod
+    def _fmu_state_to_bytes(state) -> bytes:
+        return FmuCore.state_to_bytes(state)
+
+    @staticmethod
+    def _fmu_state_from_bytes(state: bytes):
+        return FmuCore.state_from_bytes(state)

@@ -1,0 +1,165 @@
+"""The built FMU (not the source module), run in fresh processes through fmpy and libcosimpy,
+against `grapefmu simulate` on the same scene and inputs."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import numpy as np
+import pytest
+
+from grapefmu import simulate
+from grapefmu.cli import default_scene_path
+from grapefmu.model.excitation import pick_and_place
+from grapefmu.model.scene import scene_from_dict
+
+pytest.importorskip("fmpy")
+ROOT = Path(__file__).resolve().parents[1]
+STOP = 1.5
+
+
+def run(*args, timeout=600):
+    r = subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=ROOT, timeout=timeout)
+    assert r.returncode == 0, r.stderr[-3000:]
+    return r
+
+
+def drive(*args):
+    out = run("-m", "tests.fmu_driver", *map(str, args)).stdout
+    return json.loads(out.split("JSON:", 1)[1])
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fmu")
+    for fmi in (2, 3):
+        run("-m", "grapefmu", "build-fmu", "-o", str(d / f"default{fmi}.fmu"), "--fmi", str(fmi))
+    # a pick-and-place acceleration, sampled every 10 ms and held (what a controller sends)
+    t = np.round(np.arange(0, STOP + 1e-9, 1e-2), 10)
+    ex = pick_and_place([((0.0, 0.1), 0.3), ((0.3, 0.0), 0.5), ((0.0, -0.1), 0.3)], start=0.05)
+    np.savetxt(d / "signal.csv", np.column_stack([t, ex.accel(t)]), delimiter=",", header="time,ax,ay", comments="")
+    return d
+
+
+@pytest.fixture(scope="module")
+def reference(fmus):
+    """grapefmu simulate on the same scene, driven by the same held signal."""
+    import tomllib
+    doc = tomllib.loads(default_scene_path().read_text())
+    doc["excitation"] = {"kind": "csv", "file": str(fmus / "signal.csv"), "hold": True}
+    return simulate(scene_from_dict(doc, ROOT), STOP)
+
+
+def test_validator_reports_no_problems(fmus):
+    from fmpy.validation import validate_fmu
+    for fmi in (2, 3):
+        assert validate_fmu(str(fmus / f"default{fmi}.fmu")) == []
+
+
+def test_description_units_version_and_capabilities(fmus):
+    from grapefmu import __version__
+    for fmi in (2, 3):
+        with zipfile.ZipFile(fmus / f"default{fmi}.fmu") as z:
+            root = ET.fromstring(z.read("modelDescription.xml"))
+            names = z.namelist()
+        assert f"grapefmu {__version__}" in root.get("description")
+        assert "resources/scene.toml" in names and "resources/bundle/grapefmu/__init__.py" in names
+        cs = root.find("CoSimulation")
+        assert cs.get("canGetAndSetFMUstate" if fmi == 2 else "canGetAndSetFMUState") == "true"
+        units = {u.get("name") for u in root.iter("Unit")}
+        assert {"rad", "rad/s", "N", "m/s2", "kg", "J"} <= units
+    with zipfile.ZipFile(fmus / "default2.fmu") as z:
+        root = ET.fromstring(z.read("modelDescription.xml"))
+    reals = {sv.get("name"): sv.find("Real") for sv in root.iter("ScalarVariable") if sv.find("Real") is not None}
+    assert reals["angle_left"].get("unit") == "rad" and reals["contact_force"].get("unit") == "N"
+    assert all(r.get("unit") for n, r in reals.items() if n not in ("restitution", "rtol"))
+    assert all(sv.get("description") for sv in root.iter("ScalarVariable"))
+
+
+def test_fmpy_matches_grapefmu_simulate(fmus, reference):
+    res = drive("fmpy", fmus / "default2.fmu", fmus / "signal.csv", STOP, 1e-3)
+    ty = np.array(res["t_y"])
+    assert res["collision_count"] == reference.collision_count > 0
+    np.testing.assert_allclose(ty[:, 0], reference.t, atol=1e-9)
+    np.testing.assert_allclose(ty[:, 1:3], reference.angles, atol=1e-6)
+    np.testing.assert_allclose(ty[:, 5], reference.contact_force[:, 0], atol=1e-4)
+
+
+def test_result_does_not_depend_on_the_communication_step(fmus):
+    runs = {dt: np.array(drive("fmpy", fmus / "default2.fmu", fmus / "signal.csv", 0.6, dt)["t_y"])
+            for dt in (1e-4, 1e-3, 1e-2)}
+    coarse = runs[1e-2]
+    for dt in (1e-4, 1e-3):
+        common = runs[dt][:: round(1e-2 / dt)]
+        np.testing.assert_allclose(common[:, 1:5], coarse[:, 1:5], atol=1e-6)
+
+
+def test_state_roll_back_replays_bit_for_bit(fmus):
+    r = drive("replay", fmus / "default2.fmu", fmus / "signal.csv")
+    assert r == {**r, "same_in_memory": True, "same_from_bytes": True, "moved": True}
+
+
+def test_two_instances_in_one_process_are_independent(fmus):
+    r = drive("two", fmus / "default2.fmu", fmus / "signal.csv")
+    assert r["a"] == r["alone"]
+    assert r["b"] != r["a"]
+    assert r["more_alike"]
+
+
+def test_bad_input_is_refused_not_fatal_and_leaves_the_state(fmus):
+    r = drive("bad", fmus / "default2.fmu")
+    for label in ("nan input", "inf input", "huge input", "zero step", "negative step", "bad parameter"):
+        assert "status 2 (discard)" in r[label], (label, r[label])  # pythonfmu's FMI 2 wrapper: refused step
+        if label != "bad parameter":
+            assert r[label + " unchanged"]
+    assert r["recovers"]
+
+
+def test_fmi3_refuses_bad_input_with_fmi3_error(fmus):
+    code = f"""
+import math
+from fmpy import extract, read_model_description
+from fmpy.fmi3 import FMU3Slave
+from fmpy.fmi1 import FMICallException
+path = {str(fmus / 'default3.fmu')!r}
+md = read_model_description(path)
+vr = {{v.name: v.valueReference for v in md.modelVariables}}
+f = FMU3Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier, instanceName='a')
+f.instantiate(loggingOn=True)
+f.enterInitializationMode(); f.exitInitializationMode()
+f.setFloat64([vr['base_ax']], [math.nan])
+try:
+    f.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+    print('RESULT ok')
+except FMICallException as e:
+    print('RESULT', e)
+f.setFloat64([vr['base_ax']], [2.0])
+f.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+print('TIME', f.getFloat64([vr['time']])[0])
+"""
+    out = run("-c", code).stdout
+    assert "RESULT fmi3DoStep failed with status 3 (error)" in out
+    assert "TIME 0.001" in out
+
+
+def test_libcosimpy_runs_two_instances_and_matches(fmus, reference):
+    pytest.importorskip("libcosimpy")
+    r = drive("cosim", fmus / "default2.fmu", fmus / "signal.csv", STOP, 1e-3)
+    a, b = np.array(r["a"]), np.array(r["b"])
+    np.testing.assert_allclose(a[:, 1:3], reference.angles[1:], atol=1e-6)
+    heavy = np.array(drive("fmpy", fmus / "default2.fmu", fmus / "signal.csv", STOP, 1e-3, "mass_right=0.02")["t_y"])
+    np.testing.assert_allclose(b[:, 1:3], heavy[1:, 1:3], atol=1e-9)
+    assert np.abs(b[:, 2] - a[:, 2]).max() > 1e-3
+
+
+def test_build_rejects_a_bad_scene(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[[berries]]\nname="a"\nmass=-1\nradius=0.01\ntwig_length=0.03\nhinge_x=0.0\n')
+    r = subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", str(bad), "-o", str(tmp_path / "x.fmu")],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "berries[0].mass" in r.stderr
+    assert not (tmp_path / "x.fmu").exists()
