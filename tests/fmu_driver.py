@@ -2,6 +2,7 @@
 
     python -m tests.fmu_driver fmpy FMU SIGNAL.csv STOP DT [--param NAME=VALUE ...]
     python -m tests.fmu_driver cosim FMU SIGNAL.csv STOP DT
+    python -m tests.fmu_driver ecos FMU SIGNAL.csv STOP DT     (needs LD_LIBRARY_PATH=<venv>/lib for tbb)
     python -m tests.fmu_driver replay FMU SIGNAL.csv
     python -m tests.fmu_driver two FMU SIGNAL.csv
     python -m tests.fmu_driver bad FMU
@@ -113,6 +114,24 @@ def run_cosim(path, rows, stop, dt):
     return {"a": outs_a, "b": outs_b}
 
 
+def run_ecos(path, rows, stop, dt):
+    """ecospy (Ecos co-simulation engine), a third importer none of us wrote."""
+    from ecospy import EcosSimulation, EcosSimulationStructure
+    ss = EcosSimulationStructure()
+    ss.add_model("a", path)
+    sim = EcosSimulation(structure=ss, step_size=dt)
+    sim.init()
+    out = []
+    for k in range(round(stop / dt)):
+        ax, ay = held(rows, k * dt)
+        sim.set_real("a::base_ax", ax)
+        sim.set_real("a::base_ay", ay)
+        sim.step()
+        out.append([(k + 1) * dt] + [sim.get_real(f"a::{n}") for n in OUTPUTS])
+    sim.terminate()
+    return {"a": out}
+
+
 def replay(path, rows):
     """Save the state at 0.3 s, run to 0.6 s, restore (in memory and from bytes), run again."""
     f = Fmu2(path)
@@ -193,6 +212,8 @@ def main(argv):
             out = run_fmpy(path, rows, float(argv[3]), float(argv[4]), {k: float(v) for k, v in params.items()})
         elif cmd == "cosim":
             out = run_cosim(path, rows, float(argv[3]), float(argv[4]))
+        elif cmd == "ecos":
+            out = run_ecos(path, rows, float(argv[3]), float(argv[4]))
         elif cmd == "replay":
             out = replay(path, rows)
         else:

@@ -22,14 +22,14 @@ ROOT = Path(__file__).resolve().parents[1]
 STOP = 1.5
 
 
-def run(*args, timeout=600):
-    r = subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=ROOT, timeout=timeout)
+def run(*args, timeout=600, env=None):
+    r = subprocess.run([sys.executable, *args], capture_output=True, text=True, cwd=ROOT, timeout=timeout, env=env)
     assert r.returncode == 0, r.stderr[-3000:]
     return r
 
 
-def drive(*args):
-    out = run("-m", "tests.fmu_driver", *map(str, args)).stdout
+def drive(*args, env=None):
+    out = run("-m", "tests.fmu_driver", *map(str, args), env=env).stdout
     return json.loads(out.split("JSON:", 1)[1])
 
 
@@ -154,6 +154,14 @@ def test_libcosimpy_runs_two_instances_and_matches(fmus, reference):
     heavy = np.array(drive("fmpy", fmus / "default2.fmu", fmus / "signal.csv", STOP, 1e-3, "mass_right=0.02")["t_y"])
     np.testing.assert_allclose(b[:, 1:3], heavy[1:, 1:3], atol=1e-9)
     assert np.abs(b[:, 2] - a[:, 2]).max() > 1e-3
+
+
+def test_ecospy_matches(fmus, reference):
+    import os
+    env = {**os.environ, "LD_LIBRARY_PATH": str(Path(sys.prefix) / "lib")}
+    r = drive("ecos", fmus / "default2.fmu", fmus / "signal.csv", STOP, 1e-3, env=env)
+    a = np.array(r["a"])
+    np.testing.assert_allclose(a[:, 1:3], reference.angles[1:], atol=1e-6)
 
 
 def test_build_rejects_a_bad_scene(tmp_path):

@@ -17,7 +17,7 @@ import numpy as np
 from grapefmu import GrapefmuError, Solver
 from grapefmu.model.contact import LAWS
 from grapefmu.model.scene import parse_scene, scene_from_dict
-from grapefmu.physics.dynamics import berry_forces, pedicel_tension
+from grapefmu.physics.dynamics import observe
 from grapefmu.solver import core
 from grapefmu.solver.solver import SolverState
 
@@ -131,26 +131,26 @@ class FmuCore:
     def _update_outputs(self) -> None:
         s, m, v = self.solver, self.model, self.values
         S = s.state
-        lay = s.layout
-        npair = max(len(m.pairs), 1)
-        force, pen, fext, tens = np.zeros(npair), np.zeros(npair), np.zeros((m.n_berries, 2)), np.zeros(m.n_berries)
-        berry_forces(S.y, S.mode, S.v_onset, S.smooth, s.M, force, pen, fext)
+        if not hasattr(self, "_obs"):
+            n, p = m.n_berries, len(m.pairs)
+            sfx = [pair_suffix(m, k) for k in range(p)]
+            self._obs = (np.zeros((n, 2)), np.zeros(3 * n + 3 * p + 3))
+            self._real_names = ([f"angle_{b}" for b in m.names] + [f"angular_velocity_{b}" for b in m.names]
+                                + [f"pedicel_force_{b}" for b in m.names] + [f"contact_force{x}" for x in sfx]
+                                + [f"penetration{x}" for x in sfx])
+            self._bool_names = [f"in_contact{x}" for x in sfx]
+        fext, out = self._obs
         held = s._held or (0.0, 0.0)
-        pedicel_tension(S.y, held[0], held[1], fext, s.M, tens)
-        for i, b in enumerate(m.names):
-            v[f"angle_{b}"] = float(S.y[i])
-            v[f"angular_velocity_{b}"] = float(S.y[lay.n + i])
-            v[f"pedicel_force_{b}"] = float(tens[i])
-        for p in range(len(m.pairs)):
-            sfx = pair_suffix(m, p)
-            v[f"contact_force{sfx}"] = float(force[p])
-            v[f"penetration{sfx}"] = float(pen[p])
-            v[f"in_contact{sfx}"] = bool(S.mode[p] != 0)
+        observe(S.y, S.mode, S.v_onset, S.smooth, held[0], held[1], s.M, S.peak_force, S.peak_tension, fext, out)
+        vals = out.tolist()
+        k = len(self._real_names)
+        v.update(zip(self._real_names, vals))
+        v.update(zip(self._bool_names, (x > 0.5 for x in vals[k: k + len(self._bool_names)])))
+        peak_f, peak_t, dissipated = vals[-3:]
         v["collision_count"] = int(S.it[core.N_IMPACTS])
-        v["peak_contact_force"] = float(S.peak_force.max()) if len(m.pairs) else 0.0
-        v["dissipated_energy"] = float(S.y[lay.d_hinge].sum() + S.y[lay.d_coupling].sum() + S.y[lay.d_contact].sum())
-        peak_t = max(float(S.peak_tension.max()), float(tens.max()))
-        v["detachment_risk"] = bool(peak_t > self.scene.thresholds.detachment_force)
+        v["peak_contact_force"] = peak_f
+        v["dissipated_energy"] = dissipated
+        v["detachment_risk"] = v["detachment_risk"] or peak_t > self.scene.thresholds.detachment_force
 
     # --- FMU state --------------------------------------------------------------------------------
     def get_state(self) -> dict:

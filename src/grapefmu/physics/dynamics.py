@@ -237,3 +237,34 @@ def derived(ts, ys, modes, accs, v_onsets, smooths, M, force, penetration, tensi
         energy[s, 2] = vh
         energy[s, 3] = vc
         energy[s, 4] = ve
+
+
+
+@jit
+def observe(y, mode, v_onset, smooth, ax, ay, M, peak_force, peak_tension, fext, out):
+    """Everything a co-simulation face reports after a step, in one compiled call, as one vector:
+    [angles (N), angular velocities (N), pedicel tensions (N), contact forces (P), penetrations (P),
+     in contact (P, 1.0 or 0.0), largest contact force so far, largest tension so far, energy dissipated]."""
+    n = M.berry.shape[0]
+    npair = M.pair_idx.shape[0]
+    nc = M.coup_idx.shape[0]
+    force = out[3 * n: 3 * n + npair]
+    pen = out[3 * n + npair: 3 * n + 2 * npair]
+    berry_forces(y, mode, v_onset, smooth, M, force, pen, fext)
+    tension = out[2 * n: 3 * n]
+    pedicel_tension(y, ax, ay, fext, M, tension)
+    out[: 2 * n] = y[: 2 * n]
+    peak_f = 0.0
+    for p in range(npair):
+        out[3 * n + 2 * npair + p] = 1.0 if mode[p] != 0 else 0.0
+        peak_f = max(peak_f, peak_force[p])
+    peak_t = -np.inf
+    for i in range(n):
+        peak_t = max(peak_t, peak_tension[i], tension[i])
+    dissipated = 0.0
+    for k in range(2 * n, 3 * n + nc + npair):
+        dissipated += y[k]
+    o = 3 * n + 3 * npair
+    out[o] = peak_f
+    out[o + 1] = peak_t
+    out[o + 2] = dissipated

@@ -115,6 +115,7 @@ class Solver:
         self.layout = layout(self.model.n_berries, len(self.model.couplings), len(self.model.pairs))
         self.cfg = np.array([self.rtol, self.atol, self.fixed_step, s.zeno_window,
                              1.0 if self.method == "event" else 0.0, math.inf])
+        self._held_arrays = constant(1.0, 0.0).arrays  # reused for every held input: no allocation per step
         self.state = self._fresh_state(scene.initial_state, s.zeno_max_events)
         self._scratch = _buffers(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
 
@@ -146,7 +147,10 @@ class Solver:
 
     def _inputs(self, S: SolverState | None = None) -> ExcitationArrays:
         held = _held_input(self.state if S is None else S)
-        return self.excitation if held is None else constant(*held).arrays
+        if held is None:
+            return self.excitation
+        self._held_arrays.par[0], self._held_arrays.par[1] = held
+        return self._held_arrays
 
     def _refresh_derivative(self, S: SolverState) -> None:
         X = self._inputs(S)
