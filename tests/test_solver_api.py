@@ -94,3 +94,16 @@ def test_held_csv_excitation_equals_held_advances(tmp_path):
         s.advance(0.01, base_accel=tuple(acc[k]))
     assert run.collision_count > 0
     np.testing.assert_allclose(s.angles, run.angles[-1], atol=1e-9)
+
+
+def test_impacts_closed_while_stepping_match_a_whole_run(collision_scene):
+    whole = simulate(collision_scene, 1.0)
+    s = Solver(collision_scene)
+    got = []
+    for _ in range(1000):
+        s.advance(1e-3)
+        imp = s.take_impacts()
+        got += list(zip(imp.onset, imp.peak_force))
+    closed = ~whole.impacts.ongoing
+    np.testing.assert_allclose([g[0] for g in got], whole.impacts.onset[closed], atol=1e-9)
+    np.testing.assert_allclose([g[1] for g in got], whole.impacts.peak_force[closed], rtol=1e-6)

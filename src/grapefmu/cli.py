@@ -95,6 +95,23 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_replay(a: argparse.Namespace) -> int:
+    if a.publish:
+        try:
+            from grapefmu_ros.replay import publish
+        except ImportError as e:
+            raise GrapefmuError(f"replay --publish needs ROS 2 (rclpy) installed: {e}") from None
+        return publish(a.recording, a.rate)
+    from .recording.replay import check
+    r = check(a.recording)
+    if r.truncated:
+        print(f"warning: {r.truncated}", file=sys.stderr)
+    print(f"re-simulated from {'the scene' if r.source == 'scene' else 'the recorded applied inputs'}; "
+          f"{r.compared} joint states compared")
+    print(f"  largest deviation: angle {r.max_angle_deviation:.3g} rad, angular velocity {r.max_rate_deviation:.3g} rad/s")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="grapefmu", description="Berries that swing and collide when a gripper moves a grape cluster.")
     ap.add_argument("--version", action="version", version=f"grapefmu {__version__}")
@@ -113,6 +130,13 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     b.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
     b.set_defaults(func=cmd_build_fmu)
+    r = sub.add_parser("replay", help="check a recording by re-simulating it, or republish it")
+    r.add_argument("recording", help="an MCAP file written by grapefmu simulate or the ROS node")
+    g = r.add_mutually_exclusive_group(required=True)
+    g.add_argument("--check", action="store_true", help="re-simulate and report the largest deviation")
+    g.add_argument("--publish", action="store_true", help="republish the recorded topics with /clock")
+    r.add_argument("--rate", type=float, default=1.0, help="with --publish: speed factor (0 = as fast as possible)")
+    r.set_defaults(func=cmd_replay)
     p = sub.add_parser("paper", help="reproduce tests 1–9 of Xu et al. (2025) and check each claim")
     p.add_argument("--out", default="out/paper", help="directory for figures and the claims report")
     p.set_defaults(func=cmd_paper)

@@ -4,7 +4,7 @@ Topics (relative names, frame `rachis`):
   rachis/accel                     geometry_msgs/AccelStamped   the input a(t), m/s²
   joint_states                     sensor_msgs/JointState       twig_<berry>: angle, rate, hinge torque (effort)
   contact/<a>_<b>/wrench           geometry_msgs/WrenchStamped  force on berry b from berry a, N
-  pedicel_tension                  std_msgs/Float64MultiArray   one value per berry, N (dim label = berry names)
+  pedicel_tension                  sensor_msgs/JointState       twig_<berry>: tension in effort, N
   collision_events                 std_msgs/Float64MultiArray   one message per impact, fields in dim labels
 A metadata record `grapefmu` holds the scene TOML, solver settings and version, so the run can be re-simulated.
 """
@@ -52,9 +52,9 @@ def impact_messages(run: Run) -> list[tuple[float, dict]]:
 def run_metadata(run: Run) -> dict[str, str]:
     s = run.scene.solver
     return {"grapefmu_version": __version__, "scene_name": run.scene.name, "scene_toml": run.scene.source,
-            "method": str(run.stats.get("method", s.method)),
-            "solver": json.dumps({"rtol": s.rtol, "atol": s.atol, "t_end": float(run.t[-1]),
-                                  "output_interval": s.output_interval})}
+            "method": str(run.stats.get("method", s.method)), "input_source": "scene",
+            "solver": json.dumps({"rtol": run.stats.get("rtol", s.rtol), "atol": run.stats.get("atol", s.atol),
+                                  "t_end": float(run.t[-1]), "output_interval": s.output_interval})}
 
 
 def write_mcap(run: Run, path: str | Path) -> None:
@@ -87,8 +87,9 @@ def write_mcap(run: Run, path: str | Path) -> None:
                 messages.append((ns, 2, f"contact/{m.pair_name(p)}/wrench", "geometry_msgs/msg/WrenchStamped",
                                  {"header": _header(t), "wrench": {"force": {"x": f * nrm[0], "y": f * nrm[1], "z": 0.0},
                                                                    "torque": {"x": 0.0, "y": 0.0, "z": 0.0}}}))
-            messages.append((ns, 3, "pedicel_tension", "std_msgs/msg/Float64MultiArray",
-                             labelled_array(m.names, run.pedicel_force[s])))
+            messages.append((ns, 3, "pedicel_tension", "sensor_msgs/msg/JointState",
+                             {"header": _header(t), "name": joints, "position": [], "velocity": [],
+                              "effort": run.pedicel_force[s].tolist()}))
         for t, msg in impact_messages(run):
             messages.append((int(round(t * 1e9)), 4, "collision_events", "std_msgs/msg/Float64MultiArray", msg))
         messages.sort(key=lambda x: (x[0], x[1]))

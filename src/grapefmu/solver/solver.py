@@ -116,6 +116,7 @@ class Solver:
         self.cfg = np.array([self.rtol, self.atol, self.fixed_step, s.zeno_window,
                              1.0 if self.method == "event" else 0.0, math.inf])
         self._held_arrays = constant(1.0, 0.0).arrays  # reused for every held input: no allocation per step
+        self._closed: list[np.ndarray] = []
         self.state = self._fresh_state(scene.initial_state, s.zeno_max_events)
         self._scratch = _buffers(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
 
@@ -203,6 +204,7 @@ class Solver:
         status = self._integrate(math.inf, self._scratch, 1)
         if status not in (core.DONE, core.MAX_STEPS):
             self._fail(status, before)
+        self._closed.extend(self._scratch.imp[: self.state.it[core.N_IMP]].copy())
         return self.t
 
     def dense_output(self) -> Callable[[np.ndarray | float], np.ndarray]:
@@ -240,13 +242,23 @@ class Solver:
         self.state.it[core.N_IMP] = 0
         self.state.fl[core.GRID_DT] = 0.0
         t_target = self.t + dt
+        closed = []
         while True:
             status = self._integrate(t_target, self._scratch, self.max_steps)
+            closed.append(self._scratch.imp[: self.state.it[core.N_IMP]].copy())
             if status != core.IMP_FULL:
                 break
             self.state.it[core.N_IMP] = 0
         if status != core.DONE:
             self._fail(status, before)
+        self._closed.extend(r for c in closed for r in c)
+
+    def take_impacts(self):
+        """Impacts that ended since the last call (during step() or advance()), oldest first."""
+        from ..results.run import Impacts
+
+        rows, self._closed = self._closed, []
+        return Impacts.from_rows(np.array(rows).reshape(-1, core.IMPACT_COLUMNS))
 
     def _fail(self, status: int, before: SolverState) -> None:
         t = self.t
@@ -298,7 +310,8 @@ class Solver:
         if progress:
             progress(self.t, t_end)
         samples = tuple(np.concatenate([c[i] for c in chunks]) for i in range(6))
-        stats = self.stats | {"wall_time": wall, "method": self.method, "t_start": t_start}
+        stats = self.stats | {"wall_time": wall, "method": self.method, "t_start": t_start, "rtol": self.rtol,
+                              "atol": self.atol}
         return Run.from_solver(self.scene, samples, np.concatenate(impacts), self, stats)
 
 

@@ -1,0 +1,165 @@
+"""Example harvesting controller: a jerk-limited pick, carry and place of the cluster, published as
+`rachis/accel` to a simulator node in lockstep mode.
+
+open_loop: the nominal profile. gentle: the same path, slowed down (time-scaled) while the contact
+force or the pedicel tension is near its threshold: progress runs at a rate r in [r_min, 1] and the
+commanded acceleration is r² a_nominal(s), so the gripper still ends where the move ends.
+
+`python -m grapefmu_ros.controller --ros-args -p mode:=gentle`"""
+from __future__ import annotations
+
+import math
+import signal
+import sys
+
+import rclpy
+import rclpy.executors
+from geometry_msgs.msg import AccelStamped, WrenchStamped
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from grapefmu.model.excitation import pick_and_place
+
+from .messages import stamp
+
+QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
+MOVES = [((0.0, 0.10), 0.4), ((0.30, 0.0), 0.6), ((0.0, -0.10), 0.4)]
+
+
+def _t(msg_stamp) -> float:
+    return msg_stamp.sec + msg_stamp.nanosec * 1e-9
+
+
+class HarvestController(Node):
+    def __init__(self):
+        super().__init__("harvest_controller")
+        d = ParameterDescriptor
+        self.declare_parameter("mode", "open_loop", d(description="open_loop or gentle", read_only=True))
+        self.declare_parameter("dt", 1e-3, d(description="command period, s", read_only=True))
+        self.declare_parameter("contact_force_limit", 0.5, d(description="gentle: slow down above this contact force, N"))
+        self.declare_parameter("tension_limit", 0.25, d(description="gentle: slow down above this pedicel tension, N"))
+        self.declare_parameter("min_rate", 0.3, d(description="gentle: slowest progress rate (fraction of nominal)"))
+        self.declare_parameter("settle", 0.5, d(description="time to keep commanding zero after the move, s"))
+        self.declare_parameter("pairs", 1, d(description="contact pairs whose wrench to wait for each step"))
+        self.mode = self.get_parameter("mode").value
+        self.dt = self.get_parameter("dt").value
+        self.profile = pick_and_place(MOVES, start=0.1)
+        self.t_move_end = float(self.profile.arrays.table[-1, 0])
+        self.pub = self.create_publisher(AccelStamped, "rachis/accel", QOS)
+        self.create_subscription(JointState, "pedicel_tension", self.on_tension, QOS)
+        self.create_subscription(Clock, "/clock", self.on_clock, QOS)
+        self.create_subscription(Float64MultiArray, "collision_events", self.on_event,
+                                 QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                                            reliability=ReliabilityPolicy.RELIABLE))
+        self.wrench_subs = []
+        self.latest = {"tension": (None, 0.0), "clock": None, "wrench": {}}
+        self.sent_t = None    # stamp of the last command sent
+        self.s = 0.0          # progress along the nominal profile, s
+        self.rate = 1.0
+        self.next_t = 0.0     # stamp of the next command
+        self.peak_force = 0.0
+        self.peak_tension = 0.0
+        self.collisions = 0
+        self.done = False
+
+    def subscribe_wrenches(self):
+        for name, types in self.get_topic_names_and_types():
+            if name.endswith("/wrench") and "/contact/" in name and name not in [s.topic_name for s in self.wrench_subs]:
+                self.wrench_subs.append(self.create_subscription(
+                    WrenchStamped, name, lambda m, n=name: self.on_wrench(n, m), QOS))
+
+    def on_tension(self, m):
+        self.latest["tension"] = (_t(m.header.stamp), max(m.effort) if m.effort else 0.0)
+        self.peak_tension = max(self.peak_tension, self.latest["tension"][1])
+        self.try_command()
+
+    def on_wrench(self, name, m):
+        f = math.hypot(m.wrench.force.x, m.wrench.force.y)
+        self.latest["wrench"][name] = (_t(m.header.stamp), f)
+        self.peak_force = max(self.peak_force, f)
+        self.try_command()
+
+    def on_clock(self, m):
+        self.latest["clock"] = _t(m.clock)
+        self.try_command()
+
+    def on_event(self, _m):
+        self.collisions += 1
+
+    def ready(self) -> bool:
+        """The simulator has answered the last command: clock, tension and every wrench at its stamp."""
+        tk = self.sent_t
+        if tk is None or self.latest["clock"] is None or abs(self.latest["clock"] - tk) > 1e-9:
+            return False
+        if self.latest["tension"][0] is None or abs(self.latest["tension"][0] - tk) > 1e-9:
+            return False
+        ws = self.latest["wrench"]
+        return len(ws) >= self.get_parameter("pairs").value and all(abs(t - tk) < 1e-9 for t, _ in ws.values())
+
+    def try_command(self):
+        if not self.done and self.ready():
+            self.command()
+
+    def command(self):
+        t = self.next_t
+        force = max((f for _, f in self.latest["wrench"].values()), default=0.0)
+        tension = self.latest["tension"][1]
+        if self.mode == "gentle":
+            lf, lt = self.get_parameter("contact_force_limit").value, self.get_parameter("tension_limit").value
+            load = max(force / lf, tension / lt)
+            target = 1.0 if load < 0.5 else max(self.get_parameter("min_rate").value, 1.0 - (load - 0.5))
+            # fall fast, recover slowly: 20 ms and 200 ms time constants
+            tau = 0.02 if target < self.rate else 0.2
+            self.rate += (target - self.rate) * min(1.0, self.dt / tau)
+        a = self.profile.accel(self.s) * self.rate**2 if self.s < self.t_move_end else (0.0, 0.0)
+        msg = AccelStamped()
+        msg.header.stamp = stamp(t)
+        msg.header.frame_id = "rachis"
+        msg.accel.linear.x, msg.accel.linear.y = float(a[0]), float(a[1])
+        self.pub.publish(msg)
+        self.sent_t = t
+        self.s += self.dt * (self.rate if self.mode == "gentle" else 1.0)
+        self.next_t = round(t + self.dt, 9)
+        if self.s >= self.t_move_end + self.get_parameter("settle").value:
+            self.done = True
+
+    def start(self, executor):
+        """Wait for the simulator, then send the first command (stamp 0)."""
+        while self.pub.get_subscription_count() == 0 or not self.wrench_subs:
+            executor.spin_once(timeout_sec=0.1)
+            self.subscribe_wrenches()
+        for _ in range(20):  # let the simulator's publishers match ours
+            executor.spin_once(timeout_sec=0.05)
+        self.command()
+
+
+def main(args=None):
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = []
+    signal.signal(signal.SIGINT, lambda *_: stop.append(True))
+    signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
+    node = HarvestController()
+    ex = rclpy.executors.SingleThreadedExecutor()
+    ex.add_node(node)
+    try:
+        node.start(ex)
+        while not stop and not node.done:
+            ex.spin_once(timeout_sec=1.0)
+        for _ in range(10):  # collect the last events
+            ex.spin_once(timeout_sec=0.05)
+        print(f"RESULT mode={node.mode} peak_contact_force={node.peak_force:.6g} "
+              f"peak_pedicel_tension={node.peak_tension:.6g} collisions={node.collisions} "
+              f"move_time={node.next_t:.3f}", flush=True)
+    finally:
+        node.destroy_node()
+        rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,269 @@
+"""The ROS 2 node in its own process, driven over real DDS by this process acting as the controller."""
+from __future__ import annotations
+
+import math
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from geometry_msgs.msg import AccelStamped  # noqa: E402
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from std_srvs.srv import SetBool, Trigger  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+
+from grapefmu import Solver, load_scene  # noqa: E402
+from grapefmu.cli import default_scene_path  # noqa: E402
+from grapefmu.recording.replay import check, read_recording  # noqa: E402
+from grapefmu.recording.stamps import stamp_seconds  # noqa: E402
+
+QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+DOMAIN = str(random.randint(100, 200))
+ENV = {**os.environ, "ROS_DOMAIN_ID": DOMAIN, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+
+
+@pytest.fixture(scope="module")
+def ros():
+    os.environ.update({"ROS_DOMAIN_ID": DOMAIN, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
+    rclpy.init()
+    yield
+    rclpy.shutdown()
+
+
+class Controller:
+    """This process's side: publishes rachis/accel, collects what the node publishes."""
+
+    def __init__(self, name="test_controller"):
+        self.node = rclpy.create_node(name)
+        self.pub = self.node.create_publisher(AccelStamped, "rachis/accel", QOS)
+        self.states, self.events, self.diags = [], [], []
+        self.node.create_subscription(JointState, "joint_states", self.states.append, QOS)
+        self.node.create_subscription(Float64MultiArray, "collision_events", self.events.append, QOS)
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diags.append, QOS)
+        self.reset = self.node.create_client(Trigger, "reset")
+        self.pause = self.node.create_client(SetBool, "pause")
+
+    def spin(self, seconds=0.05):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            rclpy.spin_once(self.node, timeout_sec=0.01)
+
+    def wait_for(self, cond, timeout=20.0):
+        end = time.monotonic() + timeout
+        while not cond():
+            if time.monotonic() > end:
+                raise TimeoutError("the node did not answer in time")
+            rclpy.spin_once(self.node, timeout_sec=0.01)
+
+    def connect(self):
+        self.wait_for(lambda: self.pub.get_subscription_count() > 0 and
+                      self.node.count_publishers("joint_states") > 0 and self.reset.service_is_ready())
+        self.spin(0.5)
+
+    def send(self, t, ax, ay=0.0):
+        m = AccelStamped()
+        ns = int(round(t * 1e9))
+        m.header.stamp.sec, m.header.stamp.nanosec = ns // 10**9, ns % 10**9
+        m.accel.linear.x, m.accel.linear.y = float(ax), float(ay)
+        self.pub.publish(m)
+
+    def state_at(self, t):
+        for s in reversed(self.states):
+            if abs(stamp_seconds(s.header.stamp.sec, s.header.stamp.nanosec) - t) < 1e-12:
+                return s
+        return None
+
+    def call(self, client, req):
+        fut = client.call_async(req)
+        self.wait_for(fut.done)
+        return fut.result()
+
+    def close(self):
+        self.node.destroy_node()
+
+
+@contextmanager
+def sim_node(tmp_path, mode="lockstep", record=True, extra=()):
+    rec = tmp_path / f"node_{mode}_{time.monotonic_ns()}.mcap"
+    args = [sys.executable, "-m", "grapefmu_ros", "--ros-args", "-p", f"mode:={mode}", *extra]
+    if record:
+        args += ["-p", f"record:={rec}"]
+    p = subprocess.Popen(args, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        yield p, rec
+    finally:
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+def signal_rows(n=150, dt=0.01, seed=1):
+    rng = np.random.default_rng(seed)
+    return [(k * dt, float(a)) for k, a in enumerate(rng.uniform(-8, 8, n))]
+
+
+def drive(ctl, rows):
+    for t, a in rows:
+        ctl.send(t, a)
+        ctl.wait_for(lambda t=t: ctl.state_at(t) is not None)
+
+
+def test_lockstep_answers_at_input_stamps_and_events_match_the_core(ros, tmp_path):
+    rows = signal_rows()
+    with sim_node(tmp_path) as (proc, rec):
+        ctl = Controller()
+        ctl.connect()
+        drive(ctl, rows)
+        ctl.spin(0.5)
+        assert proc.poll() is None
+        stamps = {round(stamp_seconds(s.header.stamp.sec, s.header.stamp.nanosec), 9) for s in ctl.states}
+        assert {round(t, 9) for t, _ in rows} <= stamps
+        # the same held inputs through the core directly
+        solver = Solver(load_scene(default_scene_path()))
+        onsets = []
+        for (_, a), (t1, _) in zip(rows, rows[1:]):
+            solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, (a, 0.0))  # as the node computes it
+            onsets += list(solver.take_impacts().onset)
+        last = ctl.state_at(rows[-1][0])
+        np.testing.assert_array_equal(last.position, solver.angles)
+        assert len(onsets) > 0
+        np.testing.assert_allclose(sorted(e.data[1] for e in ctl.events), onsets, atol=1e-12)
+        assert all(len(s.effort) == 2 for s in ctl.states)
+        ctl.close()
+    assert check(rec).max_deviation == 0.0
+
+
+def test_lockstep_is_deterministic_and_reset_pause_work(ros, tmp_path):
+    rows = signal_rows(60)
+    with sim_node(tmp_path, record=False) as (proc, _):
+        ctl = Controller("det")
+        ctl.connect()
+        drive(ctl, rows)
+        first = [list(ctl.state_at(t).position) for t, _ in rows]
+        assert ctl.call(ctl.reset, Trigger.Request()).success
+        ctl.states.clear()
+        drive(ctl, rows)
+        second = [list(ctl.state_at(t).position) for t, _ in rows]
+        assert first == second
+        # paused: inputs do not advance time
+        assert ctl.call(ctl.pause, SetBool.Request(data=True)).success
+        n = len(ctl.states)
+        ctl.send(rows[-1][0] + 0.5, 1.0)
+        ctl.spin(1.0)
+        assert all(stamp_seconds(s.header.stamp.sec, s.header.stamp.nanosec) <= rows[-1][0] + 1e-12
+                   for s in ctl.states[n:])
+        assert ctl.call(ctl.pause, SetBool.Request(data=False)).success
+        ctl.send(rows[-1][0] + 0.6, 0.0)
+        ctl.wait_for(lambda: ctl.state_at(rows[-1][0] + 0.6) is not None)
+        ctl.close()
+
+
+def test_bad_inputs_are_rejected_and_the_node_survives(ros, tmp_path):
+    with sim_node(tmp_path, record=False) as (proc, _):
+        ctl = Controller("bad")
+        ctl.connect()
+        drive(ctl, [(0.0, 1.0), (0.01, 1.0)])
+        for t, a in ((0.02, math.nan), (0.03, math.inf), (0.04, 1e4), (0.005, 1.0)):  # the last goes backwards
+            ctl.send(t, a)
+        ctl.spin(1.0)
+        assert ctl.state_at(0.02) is None and ctl.state_at(0.03) is None and ctl.state_at(0.04) is None
+        assert proc.poll() is None
+        drive(ctl, [(0.05, 2.0)])
+        assert np.all(np.isfinite(ctl.state_at(0.05).position))
+        ctl.wait_for(lambda: any(kv.key == "rejected_inputs" and int(kv.value) == 4
+                                 for d in ctl.diags for kv in d.status[0].values), timeout=5)
+        ctl.close()
+        out = proc.stdout
+    del out
+
+
+def test_realtime_mode_follows_the_wall_clock_and_sigterm_leaves_a_complete_file(ros, tmp_path):
+    with sim_node(tmp_path, mode="realtime") as (proc, rec):
+        ctl = Controller("rt")
+        ctl.connect()
+        ctl.spin(0.5)
+        t0, w0 = ctl.states[-1], time.monotonic()
+        ctl.spin(2.0)
+        t1, w1 = ctl.states[-1], time.monotonic()
+        sim = stamp_seconds(t1.header.stamp.sec, t1.header.stamp.nanosec) - \
+            stamp_seconds(t0.header.stamp.sec, t0.header.stamp.nanosec)
+        assert 0.5 < sim / (w1 - w0) < 1.5  # locked to the clock (lenient: a loaded CI machine)
+        ctl.close()
+    r = read_recording(rec)
+    assert r.truncated is None and len(r.topics["joint_states"]) > 500
+    assert check(rec).max_deviation == 0.0
+
+
+def test_killed_node_leaves_a_readable_file_up_to_its_last_chunk(ros, tmp_path):
+    with sim_node(tmp_path, mode="realtime") as (proc, rec):
+        ctl = Controller("kill")
+        ctl.connect()
+        ctl.spin(2.0)
+        proc.kill()
+        proc.wait()
+        ctl.close()
+    r = read_recording(rec)
+    assert r.truncated and "ends abruptly" in r.truncated
+    assert len(r.topics["joint_states"]) > 100
+    res = check(rec)
+    assert res.max_deviation == 0.0 and res.truncated
+
+
+def test_recordings_read_the_same_in_rosbags_and_mcap_ros2(ros, tmp_path):
+    from rosbags.highlevel import AnyReader
+    rows = signal_rows(40)
+    with sim_node(tmp_path) as (proc, rec):
+        ctl = Controller("rb")
+        ctl.connect()
+        drive(ctl, rows)
+        ctl.close()
+    mine = read_recording(rec)
+    with AnyReader([Path(rec)]) as reader:
+        topics = {c.topic for c in reader.connections}
+        assert {"joint_states", "pedicel_tension", "contact/left_right/wrench", "rachis/accel",
+                "rachis/accel_applied", "markers", "/clock"} <= topics
+        for topic in ("joint_states", "rachis/accel_applied", "contact/left_right/wrench"):
+            conns = [c for c in reader.connections if c.topic == topic]
+            theirs = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=conns)]
+            ours = [m for _, m in mine.topics[topic]]
+            assert len(theirs) == len(ours) > 0
+            for a, b in zip(theirs, ours):
+                assert a.header.stamp.sec == b.header.stamp.sec and a.header.stamp.nanosec == b.header.stamp.nanosec
+                if topic == "joint_states":
+                    assert list(a.position) == list(b.position) and list(a.effort) == list(b.effort)
+                elif topic == "rachis/accel_applied":
+                    assert a.accel.linear.x == b.accel.linear.x
+                else:
+                    assert a.wrench.force.x == b.wrench.force.x
+
+
+def test_hand_written_schemas_match_the_installed_definitions():
+    """The simulate writer's ros2msg texts (no ROS needed) against the installed .msg files."""
+    from grapefmu.recording.msgdefs import MSGDEFS
+    from grapefmu_ros.msgdefs import full_definition
+
+    def fields(text):
+        out = []
+        for block in text.split("=" * 80):
+            for line in block.splitlines():
+                line = line.split("#", 1)[0].strip()
+                if line and not line.startswith("MSG:") and "=" not in line:
+                    typ, name = line.split()[:2]
+                    out.append(f"{typ.split('/')[-1]} {name}")  # .msg files omit their own package
+        return sorted(set(out))
+    for dtype, text in MSGDEFS.items():
+        assert fields(text) == fields(full_definition(dtype)), dtype
