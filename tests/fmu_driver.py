@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import sys
 
 import numpy as np
@@ -218,8 +219,25 @@ def main(argv):
             out = replay(path, rows)
         else:
             out = two(path, rows)
-    print("JSON:" + json.dumps(out))
+    print("JSON:" + json.dumps(out), flush=True)
+
+
+def release_all():
+    """Terminate and free every instance while Python is fully alive: pythonfmu's loader keeps global
+    state whose teardown at interpreter exit can hit freed Python objects (seen as an occasional
+    'corrupted double-linked list' abort after all work was done)."""
+    import gc
+    for obj in gc.get_objects():
+        if type(obj).__name__ == "Fmu2":
+            try:
+                obj.fmu.terminate()
+                obj.fmu.freeInstance()
+            except Exception:  # noqa: BLE001 - an instance that refused initialization
+                pass
 
 
 if __name__ == "__main__":
     main(sys.argv[1:])
+    release_all()
+    sys.stdout.flush()
+    os._exit(0)
