@@ -2,16 +2,13 @@
 independent variable. A refused step returns fmi3Error with a logged message, never Fatal."""
 from __future__ import annotations
 
-from pathlib import Path
 from xml.etree.ElementTree import Element
 
 from pythonfmu3 import Boolean, Fmi3Causality, Fmi3Initial, Fmi3Slave, Fmi3Status, Fmi3Variability, Float64, Int32
 from pythonfmu3.fmi3slave import Fmi3StepResult
 from pythonfmu3.unit import Unit
 
-from grapefmu import __version__
-
-from .core import FmuCore
+from .common import GrapeSlaveMixin
 from .units import BASE_UNITS
 
 TYPES = {"real": Float64, "integer": Int32, "boolean": Boolean}
@@ -24,17 +21,10 @@ class _UnitWithoutBase(Unit):
         return Element(self.tag, {"name": self.name})
 
 
-class GrapeFmi3Slave(Fmi3Slave):
-    scene_file = "scene.toml"
-
+class GrapeFmi3Slave(GrapeSlaveMixin, Fmi3Slave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.core = FmuCore(Path(kwargs.get("resources") or ".") / self.scene_file)
-        self.description = (f"grapefmu {__version__}: berries on hinged twigs that swing and collide under "
-                            f"base excitation; scene '{self.core.scene.name}'")
-        self.author = "grapefmu"
-        self.version = __version__
-        self.start_time = 0.0
+        self._setup(kwargs)
         self.time = 0.0
         units = {v.unit for v in self.core.vars if v.unit not in ("", "1")} | {"s"}
         self.register_units([Unit(u, **BASE_UNITS[u]) if BASE_UNITS.get(u) is not None else _UnitWithoutBase(u)
@@ -46,10 +36,7 @@ class GrapeFmi3Slave(Fmi3Slave):
             self._register(var)
 
     def _register(self, var):
-        values = self.core.values
-        kw = {"description": var.description,
-              "getter": lambda n=var.name: values[n],
-              "setter": lambda x, n=var.name: values.__setitem__(n, x)}
+        kw = {"description": var.description, **self._accessors(var.name)}
         if var.type == "real" and var.unit not in ("", "1"):
             kw["unit"] = var.unit
         cont = Fmi3Variability.continuous if var.type == "real" else Fmi3Variability.discrete
@@ -84,11 +71,3 @@ class GrapeFmi3Slave(Fmi3Slave):
     def _set_fmu_state(self, state):
         self.time = state.get("time", self.time)
         self.core.set_state(state)
-
-    @staticmethod
-    def _fmu_state_to_bytes(state) -> bytes:
-        return FmuCore.state_to_bytes(state)
-
-    @staticmethod
-    def _fmu_state_from_bytes(state: bytes):
-        return FmuCore.state_from_bytes(state)

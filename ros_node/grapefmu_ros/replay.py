@@ -6,11 +6,10 @@ import importlib
 import time
 
 import rclpy
-from mcap.records import Channel, Message, Schema
-from mcap.stream_reader import StreamReader
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
+from grapefmu.recording.replay import iter_messages
 from grapefmu.recording.stamps import seconds
 
 from .messages import stamp
@@ -26,7 +25,7 @@ def message_class(datatype: str):
 def publish(path: str, rate: float = 1.0) -> int:
     rclpy.init()
     node = rclpy.create_node("grapefmu_replay")
-    pubs, channels, schemas = {}, {}, {}
+    pubs = {}
     clock = node.create_publisher(Clock, "/clock", 10)
     n = 0
     try:
@@ -34,26 +33,19 @@ def publish(path: str, rate: float = 1.0) -> int:
             wall0 = time.monotonic()
             t0 = None
             try:
-                for r in StreamReader(fh).records:
-                    if isinstance(r, Schema):
-                        schemas[r.id] = r
-                    elif isinstance(r, Channel):
-                        channels[r.id] = r
-                    elif isinstance(r, Message):
-                        ch = channels[r.channel_id]
-                        if ch.topic == "/clock":
-                            continue
-                        if ch.topic not in pubs:
-                            pubs[ch.topic] = node.create_publisher(message_class(schemas[ch.schema_id].name),
-                                                                   ch.topic, QOS)
-                        t0 = r.log_time if t0 is None else t0
-                        if rate > 0:
-                            delay = seconds(r.log_time - t0) / rate - (time.monotonic() - wall0)
-                            if delay > 0:
-                                time.sleep(delay)
-                        clock.publish(Clock(clock=stamp(seconds(r.log_time))))
-                        pubs[ch.topic].publish(bytes(r.data))
-                        n += 1
+                for schema, ch, r in iter_messages(fh):
+                    if ch.topic == "/clock":
+                        continue
+                    if ch.topic not in pubs:
+                        pubs[ch.topic] = node.create_publisher(message_class(schema.name), ch.topic, QOS)
+                    t0 = r.log_time if t0 is None else t0
+                    if rate > 0:
+                        delay = seconds(r.log_time - t0) / rate - (time.monotonic() - wall0)
+                        if delay > 0:
+                            time.sleep(delay)
+                    clock.publish(Clock(clock=stamp(seconds(r.log_time))))
+                    pubs[ch.topic].publish(bytes(r.data))
+                    n += 1
             except Exception as e:  # noqa: BLE001 - a torn end: report, keep what was published
                 print(f"warning: {path} ends abruptly ({type(e).__name__}); stopped after {n} messages")
     finally:

@@ -112,6 +112,11 @@ def cmd_replay(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(a: argparse.Namespace) -> int:
+    from .bench.harness import main as bench
+    return bench(a.quick, Path(a.out), Path(a.plots))
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="grapefmu", description="Berries that swing and collide when a gripper moves a grape cluster.")
     ap.add_argument("--version", action="version", version=f"grapefmu {__version__}")
@@ -137,6 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--publish", action="store_true", help="republish the recorded topics with /clock")
     r.add_argument("--rate", type=float, default=1.0, help="with --publish: speed factor (0 = as fast as possible)")
     r.set_defaults(func=cmd_replay)
+    be = sub.add_parser("bench", help="speed against error on hard scenes, side by side with peer methods")
+    be.add_argument("--quick", action="store_true", help="two scenes, few settings (under a minute)")
+    be.add_argument("--out", default="docs/benchmarks.md", help="the Markdown report to write")
+    be.add_argument("--plots", default="docs/bench", help="directory for one work–precision plot per scene")
+    be.set_defaults(func=cmd_bench)
     p = sub.add_parser("paper", help="reproduce tests 1–9 of Xu et al. (2025) and check each claim")
     p.add_argument("--out", default="out/paper", help="directory for figures and the claims report")
     p.set_defaults(func=cmd_paper)

@@ -30,10 +30,26 @@ class Recording:
         return max((m[-1][0] for m in self.topics.values() if m), default=0) / 1e9
 
 
-def read_recording(path: str | Path, topics: set[str] | None = None) -> Recording:
-    """Stream the file record by record, so a torn end still yields every complete chunk before it."""
+def iter_messages(fh, on_metadata=None):
+    """(schema, channel, message record) for every message, streamed record by record, so a file with a
+    torn end yields every complete chunk before the reader raises at the tear."""
     from mcap.records import Channel, Message, Metadata, Schema
     from mcap.stream_reader import StreamReader
+
+    schemas, channels = {}, {}
+    for r in StreamReader(fh).records:
+        if isinstance(r, Schema):
+            schemas[r.id] = r
+        elif isinstance(r, Channel):
+            channels[r.id] = r
+        elif isinstance(r, Metadata) and on_metadata:
+            on_metadata(r)
+        elif isinstance(r, Message):
+            ch = channels[r.channel_id]
+            yield schemas[ch.schema_id], ch, r
+
+
+def read_recording(path: str | Path, topics: set[str] | None = None) -> Recording:
     from mcap_ros2.decoder import DecoderFactory
 
     path = Path(path)
@@ -41,24 +57,20 @@ def read_recording(path: str | Path, topics: set[str] | None = None) -> Recordin
         raise GrapefmuError(f"{path}: no such recording")
     rec = Recording(path, {})
     factory = DecoderFactory()
-    schemas, channels, decoders = {}, {}, {}
+    decoders = {}
+
+    def keep_metadata(r):
+        if r.name == "grapefmu":
+            rec.metadata.update(r.metadata)
     with open(path, "rb") as fh:
         try:
-            for r in StreamReader(fh).records:
-                if isinstance(r, Schema):
-                    schemas[r.id] = r
-                elif isinstance(r, Channel):
-                    channels[r.id] = r
-                elif isinstance(r, Metadata) and r.name == "grapefmu":
-                    rec.metadata.update(r.metadata)
-                elif isinstance(r, Message):
-                    ch = channels[r.channel_id]
-                    if topics and ch.topic not in topics:
-                        continue
-                    if ch.id not in decoders:
-                        decoders[ch.id] = factory.decoder_for(ch.message_encoding, schemas[ch.schema_id])
-                    rec.topics.setdefault(ch.topic, []).append((r.log_time, decoders[ch.id](r.data)))
-                    rec.count += 1
+            for schema, ch, r in iter_messages(fh, keep_metadata):
+                if topics and ch.topic not in topics:
+                    continue
+                if ch.id not in decoders:
+                    decoders[ch.id] = factory.decoder_for(ch.message_encoding, schema)
+                rec.topics.setdefault(ch.topic, []).append((r.log_time, decoders[ch.id](r.data)))
+                rec.count += 1
         except Exception as e:  # noqa: BLE001 - mcap raises several types at a torn end
             rec.truncated = (f"{path} ends abruptly ({type(e).__name__}: the recorder did not close it, probably "
                              f"killed); {rec.count} messages read, up to t = {rec.last_time:.6f} s")

@@ -78,7 +78,7 @@ class Run:
         t, y, mode, acc, vo, sm = samples
         npair = len(scene.model.pairs)
         return cls(scene, t, y, mode[:, :npair], acc, vo[:, :npair], sm[:, :npair], Impacts.from_rows(allrows, ongoing),
-                   S.peak_force.copy(), np.maximum(S.peak_tension.copy(), -np.inf), stats)
+                   S.peak_force.copy(), S.peak_tension.copy(), stats)
 
     # --- layout and raw state ---------------------------------------------------------------------
     @property

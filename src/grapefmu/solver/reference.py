@@ -41,7 +41,7 @@ class _State:
 
 def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float | None = None,
                        atol: float | None = None, output_interval: float | None = None,
-                       integrator: str = "DOP853"):
+                       integrator: str = "DOP853", max_step: float = MAX_STEP):
     from ..results.run import Impacts, Run
 
     s = scene.solver
@@ -99,7 +99,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
                 events.append(make_event(p, fn, sg, t))
                 labels.append((p, fn))
         sol = solve_ivp(f, (t, t_stop), y, method=integrator, rtol=rtol, atol=atol, dense_output=True,
-                        events=events or None, max_step=MAX_STEP)
+                        events=events or None, max_step=max_step)
         nfev += sol.nfev
         if sol.status < 0:
             raise SolverError(f"reference: solve_ivp failed at t = {sol.t[-1]:.6g} s: {sol.message}")

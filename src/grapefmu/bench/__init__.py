@@ -1,0 +1,1 @@
+"""`grapefmu bench`: speed against error on hard scenes, side by side with peer methods."""
