@@ -22,11 +22,30 @@ def message_class(datatype: str):
     return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
+DISCOVERY_S = 2.0  # how long to wait for a first subscriber before playing (like rosbag2 play --delay)
+
+
+def _publishers(node, path: str) -> dict:
+    """One publisher per recorded topic, created before playing so discovery can match them first."""
+    pubs = {}
+    with open(path, "rb") as fh:
+        try:
+            for schema, ch, _ in iter_messages(fh):
+                if ch.topic != "/clock" and ch.topic not in pubs:
+                    pubs[ch.topic] = node.create_publisher(message_class(schema.name), ch.topic, QOS)
+        except Exception:  # noqa: BLE001 - a torn end: the topics seen so far
+            pass
+    return pubs
+
+
 def publish(path: str, rate: float = 1.0) -> int:
     rclpy.init()
     node = rclpy.create_node("grapefmu_replay")
-    pubs = {}
     clock = node.create_publisher(Clock, "/clock", 10)
+    pubs = _publishers(node, path)
+    end = time.monotonic() + DISCOVERY_S
+    while time.monotonic() < end and not any(p.get_subscription_count() for p in pubs.values()):
+        rclpy.spin_once(node, timeout_sec=0.05)
     n = 0
     try:
         with open(path, "rb") as fh:
@@ -34,10 +53,8 @@ def publish(path: str, rate: float = 1.0) -> int:
             t0 = None
             try:
                 for schema, ch, r in iter_messages(fh):
-                    if ch.topic == "/clock":
-                        continue
                     if ch.topic not in pubs:
-                        pubs[ch.topic] = node.create_publisher(message_class(schema.name), ch.topic, QOS)
+                        continue
                     t0 = r.log_time if t0 is None else t0
                     if rate > 0:
                         delay = seconds(r.log_time - t0) / rate - (time.monotonic() - wall0)
