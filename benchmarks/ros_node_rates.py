@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 
-DOMAIN = str(random.randint(201, 230))
+DOMAIN = str(random.randint(60, 90))  # ≤ 101: DDS ports stay out of the ephemeral range
 os.environ.update({"ROS_DOMAIN_ID": DOMAIN, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
 
 import rclpy  # noqa: E402

@@ -29,13 +29,14 @@ from grapefmu.recording.replay import check, read_recording  # noqa: E402
 from grapefmu.recording.stamps import stamp_seconds  # noqa: E402
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-DOMAIN = str(random.randint(100, 200))
-ENV = {**os.environ, "ROS_DOMAIN_ID": DOMAIN, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+DOMAIN = str(random.randint(1, 50))  # ≤ 101: higher domains put DDS ports in Linux's ephemeral range
+DDS = {"ROS_DOMAIN_ID": DOMAIN, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
+ENV = {**os.environ, **DDS}
 
 
 @pytest.fixture(scope="module")
 def ros():
-    os.environ.update({"ROS_DOMAIN_ID": DOMAIN, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
+    os.environ.update(DDS)
     rclpy.init()
     yield
     rclpy.shutdown()
@@ -269,28 +270,46 @@ def test_hand_written_schemas_match_the_installed_definitions():
         assert fields(text) == fields(full_definition(dtype)), dtype
 
 
-def test_replay_publish_republishes_the_recorded_topics(ros, tmp_path):
-    """`grapefmu replay --publish` of a simulate recording, received here over DDS."""
+LISTENER = """
+import json, sys, time
+import rclpy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+rclpy.init()
+node = rclpy.create_node("replay_listener")
+got = []
+qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+node.create_subscription(JointState, "joint_states", got.append, qos)
+print("READY", flush=True)
+end = time.monotonic() + float(sys.argv[1])
+while time.monotonic() < end:
+    rclpy.spin_once(node, timeout_sec=0.01)
+last = got[-1] if got else None
+print("JSON:" + json.dumps({"n": len(got), "last_ns": last.header.stamp.sec * 10**9 + last.header.stamp.nanosec
+                           if last else None, "last": list(last.position) if last else None}), flush=True)
+"""
+
+
+def test_replay_publish_republishes_the_recorded_topics(tmp_path):
+    """`grapefmu replay --publish` of a simulate recording, received by a listener in another process."""
+    import json
     from grapefmu import simulate
     from grapefmu.results.writers import write_run
     run = simulate(load_scene(default_scene_path()), 0.2)
     rec = tmp_path / "sim.mcap"
     write_run(run, rec)
-    node = rclpy.create_node("replay_listener")
-    got = []
-    node.create_subscription(JointState, "joint_states", got.append, QOS)
-    p = subprocess.Popen([sys.executable, "-m", "grapefmu", "replay", str(rec), "--publish", "--rate", "1"], env=ENV,
-                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    end = time.monotonic() + 60
-    while p.poll() is None and time.monotonic() < end:
-        rclpy.spin_once(node, timeout_sec=0.01)
-    for _ in range(50):
-        rclpy.spin_once(node, timeout_sec=0.01)
-    out = p.communicate()[0]
-    assert p.returncode == 0, out
-    assert "republished" in out
-    assert len(got) > 0.5 * len(run.t)  # discovery may eat the first few
-    last = got[-1]
-    k = int(round(stamp_seconds(last.header.stamp.sec, last.header.stamp.nanosec) / 1e-3))
-    assert list(last.position) == list(run.angles[k])
-    node.destroy_node()
+    env = {**ENV, "ROS_DOMAIN_ID": str(int(DOMAIN) + 50)}  # a domain of its own, no earlier test's participants
+    listener = subprocess.Popen([sys.executable, "-c", LISTENER, "12"], env=env, stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)
+    early = []
+    while (line := listener.stdout.readline()) and line.strip() != "READY":
+        early.append(line)  # Fast DDS may log before the node is up
+    r = subprocess.run([sys.executable, "-m", "grapefmu", "replay", str(rec), "--publish", "--rate", "1"], env=env,
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "republished" in r.stdout
+    out = listener.communicate(timeout=60)[0]
+    res = json.loads(out.split("JSON:", 1)[1])
+    assert res["n"] > 0.5 * len(run.t), f"listener: {''.join(early)}{out}\nreplay: {r.stdout}{r.stderr}"
+    k = int(round(res["last_ns"] / 1e6))
+    assert res["last"] == list(run.angles[k])

@@ -1,11 +1,16 @@
 """`grapefmu replay run.mcap --publish [--rate X]`: republish a recording's topics, paced by their log
-times (rate 1 = real time, 0 = as fast as possible), with /clock, as recorded CDR bytes."""
+times (rate 1 = real time, 0 = as fast as possible), with /clock.
+
+Each message is deserialized and published as a message object: publishing the recorded CDR bytes
+directly reached no subscriber over Fast DDS's default shared-memory transport here (it did over UDP)."""
 from __future__ import annotations
 
 import importlib
 import time
 
 import rclpy
+from rclpy.duration import Duration
+from rclpy.serialization import deserialize_message
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
@@ -22,7 +27,10 @@ def message_class(datatype: str):
     return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
-DISCOVERY_S = 2.0  # how long to wait for a first subscriber before playing (like rosbag2 play --delay)
+#: Discovery before playing (like rosbag2 play --delay): at least MIN, then until a subscriber has matched,
+#: at most MAX. A listener that announced itself just before the replayer started is only seen at its
+#: next periodic announcement, so a fixed short delay missed it about half the time.
+DISCOVERY_MIN_S, DISCOVERY_MAX_S = 1.0, 5.0
 
 
 def _publishers(node, path: str) -> dict:
@@ -32,7 +40,8 @@ def _publishers(node, path: str) -> dict:
         try:
             for schema, ch, _ in iter_messages(fh):
                 if ch.topic != "/clock" and ch.topic not in pubs:
-                    pubs[ch.topic] = node.create_publisher(message_class(schema.name), ch.topic, QOS)
+                    cls = message_class(schema.name)
+                    pubs[ch.topic] = (node.create_publisher(cls, ch.topic, QOS), cls)
         except Exception:  # noqa: BLE001 - a torn end: the topics seen so far
             pass
     return pubs
@@ -43,9 +52,11 @@ def publish(path: str, rate: float = 1.0) -> int:
     node = rclpy.create_node("grapefmu_replay")
     clock = node.create_publisher(Clock, "/clock", 10)
     pubs = _publishers(node, path)
-    end = time.monotonic() + DISCOVERY_S
-    while time.monotonic() < end and not any(p.get_subscription_count() for p in pubs.values()):
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < DISCOVERY_MAX_S:
         rclpy.spin_once(node, timeout_sec=0.05)
+        if time.monotonic() - t0 > DISCOVERY_MIN_S and any(p.get_subscription_count() for p, _ in pubs.values()):
+            break
     n = 0
     try:
         with open(path, "rb") as fh:
@@ -61,10 +72,14 @@ def publish(path: str, rate: float = 1.0) -> int:
                         if delay > 0:
                             time.sleep(delay)
                     clock.publish(Clock(clock=stamp(seconds(r.log_time))))
-                    pubs[ch.topic].publish(bytes(r.data))
+                    pub, cls = pubs[ch.topic]
+                    pub.publish(deserialize_message(bytes(r.data), cls))
                     n += 1
             except Exception as e:  # noqa: BLE001 - a torn end: report, keep what was published
                 print(f"warning: {path} ends abruptly ({type(e).__name__}); stopped after {n} messages")
+        # reliable delivery is asynchronous: exiting now would drop what subscribers have not yet acknowledged
+        for pub, _ in pubs.values():
+            pub.wait_for_all_acked(Duration(seconds=5.0))
     finally:
         node.destroy_node()
         rclpy.shutdown()
