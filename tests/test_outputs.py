@@ -74,3 +74,16 @@ def test_main_command_writes_plot_and_mcap(tmp_path):
     assert (tmp_path / "d.png").stat().st_size > 20_000
     assert (tmp_path / "d.mcap").stat().st_size > 10_000
     assert not list(Path(tmp_path).glob(".*.part"))
+
+
+@pytest.mark.parametrize("name", ["open_loop", "gentle"])
+def test_example_recordings_read_back_and_replay_exactly(name):
+    from rosbags.highlevel import AnyReader
+
+    from grapefmu.recording.replay import check
+    path = Path(__file__).resolve().parents[1] / "recordings" / f"{name}.mcap"
+    with AnyReader([path]) as r:
+        topics = {c.topic: c.msgcount for c in r.connections}
+    assert topics["joint_states"] > 2000 and "collision_events" in topics and "rachis/accel_applied" in topics
+    res = check(path)
+    assert res.truncated is None and res.compared >= 2000 and res.max_deviation == 0.0
