@@ -14,7 +14,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..physics.dynamics import (HC, HC_MIN_APPROACH_SPEED, KV, base_accel, berry_forces, contact_law, jit,
+from ..physics.dynamics import (HC_MIN_APPROACH_SPEED, base_accel, berry_forces, contact_law, jit,
                                 pair_force, pair_kinematics, pedicel_tension, rhs)
 
 #: the right-hand side inlined into the stage loop only: a compiled call passing a dozen arrays costs
