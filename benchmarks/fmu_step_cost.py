@@ -63,7 +63,7 @@ WORKER = textwrap.dedent('''
             t = dt
             w = time.perf_counter()
             for k in range(n):
-                f.setReal([vr["base_ax"], vr["base_ay"]], [acc[k], 0.0])
+                f.setReal([vr["base_ax"], vr["base_az"]], [acc[k], 0.0])
                 f.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
                 f.getReal(outs)
                 t += dt
@@ -81,7 +81,7 @@ WORKER = textwrap.dedent('''
             ex.step()
             w = time.perf_counter()
             for k in range(n):
-                m.slave_real_values(a, [vr["base_ax"], vr["base_ay"]], [acc[k], 0.0])
+                m.slave_real_values(a, [vr["base_ax"], vr["base_az"]], [acc[k], 0.0])
                 ex.step()
                 o.last_real_values(a, outs)
             best = min(best, (time.perf_counter() - w) / n)

@@ -72,7 +72,7 @@ class Fmu2:
         return list(self.fmu.getReal([self.vr[n] for n in names]))
 
     def step(self, dt, ax, ay):
-        self.fmu.setReal([self.vr["base_ax"], self.vr["base_ay"]], [ax, ay])
+        self.fmu.setReal([self.vr["base_ax"], self.vr["base_az"]], [ax, ay])
         self.fmu.doStep(currentCommunicationPoint=self.t, communicationStepSize=dt)
         self.t += dt
 
@@ -108,7 +108,7 @@ def run_cosim(path, rows, stop, dt):
     for k in range(round(stop / dt)):
         ax, ay = held(rows, k * dt)
         for s in (a, b):
-            manip.slave_real_values(s, [vr["base_ax"], vr["base_ay"]], [ax, ay])
+            manip.slave_real_values(s, [vr["base_ax"], vr["base_az"]], [ax, ay])
         ex.step()
         outs_a.append([(k + 1) * dt] + list(obs.last_real_values(a, [vr[n] for n in OUTPUTS])))
         outs_b.append([(k + 1) * dt] + list(obs.last_real_values(b, [vr[n] for n in OUTPUTS])))
@@ -126,7 +126,7 @@ def run_ecos(path, rows, stop, dt):
     for k in range(round(stop / dt)):
         ax, ay = held(rows, k * dt)
         sim.set_real("a::base_ax", ax)
-        sim.set_real("a::base_ay", ay)
+        sim.set_real("a::base_az", ay)
         sim.step()
         out.append([(k + 1) * dt] + [sim.get_real(f"a::{n}") for n in OUTPUTS])
     sim.terminate()
@@ -184,7 +184,7 @@ def bad(path):
     before = f.get(OUTPUTS)
     for label, ax, dt in (("nan input", math.nan, 1e-3), ("inf input", math.inf, 1e-3),
                           ("huge input", 1e6, 1e-3), ("zero step", 0.0, 0.0), ("negative step", 0.0, -1e-3)):
-        f.fmu.setReal([f.vr["base_ax"], f.vr["base_ay"]], [ax, 0.0])
+        f.fmu.setReal([f.vr["base_ax"], f.vr["base_az"]], [ax, 0.0])
         try:
             f.fmu.doStep(currentCommunicationPoint=f.t, communicationStepSize=dt)
             results[label] = "ok"

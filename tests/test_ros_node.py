@@ -76,7 +76,7 @@ class Controller:
         m = AccelStamped()
         ns = int(round(t * 1e9))
         m.header.stamp.sec, m.header.stamp.nanosec = ns // 10**9, ns % 10**9
-        m.accel.linear.x, m.accel.linear.y = float(ax), float(ay)
+        m.accel.linear.x, m.accel.linear.z = float(ax), float(ay)
         self.pub.publish(m)
 
     def state_at(self, t):

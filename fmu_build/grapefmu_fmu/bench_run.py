@@ -42,7 +42,7 @@ def main(scene_path: str) -> None:
             rows = [f.getReal(outs)]
             w = time.perf_counter()
             for k in range(steps):
-                f.setReal([vr["base_ax"], vr["base_ay"]], [float(acc[k, 0]), float(acc[k, 1])])
+                f.setReal([vr["base_ax"], vr["base_az"]], [float(acc[k, 0]), float(acc[k, 1])])
                 f.doStep(currentCommunicationPoint=k * dt, communicationStepSize=dt)
                 rows.append(f.getReal(outs))
             best = min(best, time.perf_counter() - w)

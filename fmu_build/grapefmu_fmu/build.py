@@ -21,7 +21,8 @@ from grapefmu.model import load_scene
 from grapefmu.results.writers import atomic_path
 
 from .units import BASE_UNITS
-from .variables import variables
+from .core import OUTPUTS_FILE
+from .variables import OUTPUT_SETS, default_outputs, variables
 
 PACKAGES = (Path(grapefmu.__file__).parent, Path(__file__).parent)
 
@@ -69,15 +70,19 @@ def model_identifier(scene_name: str, text: str, fmi: int) -> str:
     return f"Grapefmu_{stem}_{digest}"
 
 
-def build_fmu(scene_path: str | Path, out: str | Path, fmi: int = 2) -> Path:
+def build_fmu(scene_path: str | Path, out: str | Path, fmi: int = 2, outputs: str | None = None) -> Path:
+    """outputs: "full" (per angle, berry and pair) or "summary" (cluster totals); default by scene size."""
     scene_path = Path(scene_path)
     scene = load_scene(scene_path)  # validates before anything is built
     if fmi not in (2, 3):
         raise grapefmu.GrapefmuError(f"--fmi: expected 2 or 3, got {fmi!r}")
+    outputs = outputs or default_outputs(scene.model)
+    if outputs not in OUTPUT_SETS:
+        raise grapefmu.GrapefmuError(f"--outputs: expected one of {', '.join(OUTPUT_SETS)}, got {outputs!r}")
     if scene.excitation.kind == "csv":
         raise grapefmu.GrapefmuError("an FMU is driven by its inputs; remove the scene's [excitation] csv table")
     out = Path(out)
-    ident = model_identifier(scene.name, scene.source, fmi)
+    ident = model_identifier(scene.name, scene.source + outputs, fmi)
     with tempfile.TemporaryDirectory(prefix="grapefmu_fmu_") as tmp:
         tmp = Path(tmp)
         src = tmp / "src"
@@ -86,14 +91,16 @@ def build_fmu(scene_path: str | Path, out: str | Path, fmi: int = 2) -> Path:
         script.write_text(SCRIPT.format(version=grapefmu.__version__, scene=scene.name, fmi=fmi,
                                         pythonfmu="pythonfmu" if fmi == 2 else "pythonfmu3", cls=ident))
         (src / "scene.toml").write_text(scene.source)
+        (src / OUTPUTS_FILE).write_text(outputs)
         bundle = src / "bundle"
         for pkg in PACKAGES:
             shutil.copytree(pkg, bundle / pkg.name, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.nbi",
                                                                                  "*.nbc"))
         (src / "requirements.txt").write_text(f"grapefmu=={grapefmu.__version__}\n")
-        built = _run_builder(script, [src / "scene.toml", bundle, src / "requirements.txt"], tmp / "out", fmi)
+        built = _run_builder(script, [src / "scene.toml", src / OUTPUTS_FILE, bundle, src / "requirements.txt"],
+                             tmp / "out", fmi)
         if fmi == 2:
-            _add_fmi2_units(built, scene)
+            _add_fmi2_units(built, scene, outputs)
         with atomic_path(out) as part:
             shutil.copyfile(built, part)
     sys.modules.pop(script.stem, None)
@@ -114,12 +121,12 @@ def _run_builder(script: Path, files: list[Path], dest: Path, fmi: int) -> Path:
         sys.path.remove(str(script.parent))
 
 
-def _add_fmi2_units(fmu: Path, scene) -> None:
+def _add_fmi2_units(fmu: Path, scene, outputs: str) -> None:
     """pythonfmu writes no units in FMI 2.0: add UnitDefinitions and a unit attribute on every Real."""
     with zipfile.ZipFile(fmu) as z:
         entries = {n: z.read(n) for n in z.namelist()}
     root = ET.fromstring(entries["modelDescription.xml"])
-    units = {v.name: v.unit for v in variables(scene.model)}
+    units = {v.name: v.unit for v in variables(scene.model, outputs)}
     used = sorted({u for u in units.values() if u not in ("", "1")})
     defs = ET.Element("UnitDefinitions")
     for u in used:

@@ -21,9 +21,12 @@ from grapefmu.physics.dynamics import observe
 from grapefmu.solver import core
 from grapefmu.solver.solver import SolverState
 
-from .variables import Var, pair_suffix, variables
+from .variables import OUTPUT_SETS, Var, default_outputs, pair_suffix, variables
 
 MAX_INPUT = 1e3  # m/s², the scene validator's bound on accelerations
+
+
+OUTPUTS_FILE = "outputs.txt"  # in the resources next to the scene: "full" or "summary"
 
 
 class FmuCore:
@@ -33,7 +36,13 @@ class FmuCore:
         self.doc = tomllib.loads(scene_path.read_text())
         self.scene = parse_scene(scene_path.read_text(), base_dir=self.base_dir, name=scene_path.stem)
         self.model = self.scene.model
-        self.vars: list[Var] = variables(self.model)
+        chosen = self.base_dir / OUTPUTS_FILE
+        self.outputs = chosen.read_text().strip() if chosen.exists() else default_outputs(self.model)
+        if self.outputs not in OUTPUT_SETS:
+            raise GrapefmuError(f"{OUTPUTS_FILE}: expected one of {OUTPUT_SETS}, got {self.outputs!r}")
+        self.full = self.outputs == "full"
+        self.vars: list[Var] = variables(self.model, self.outputs)
+        self.bruising = 0
         self.values: dict[str, float | int | bool] = self._start_values()
         self.solver: Solver | None = None
         self.error: str | None = None
@@ -41,15 +50,22 @@ class FmuCore:
     # --- values -----------------------------------------------------------------------------------
     def _start_values(self) -> dict:
         m, sc = self.model, self.scene
-        val: dict = {"base_ax": 0.0, "base_ay": 0.0}
-        for i, b in enumerate(m.berries):
-            val.update({f"angle_{b.name}": sc.angles[i], f"angular_velocity_{b.name}": sc.angular_velocities[i],
-                        f"pedicel_force_{b.name}": 0.0, f"mass_{b.name}": b.mass, f"radius_{b.name}": b.radius,
-                        f"twig_length_{b.name}": b.twig_length, f"hinge_x_{b.name}": b.hinge_x,
-                        f"hinge_stiffness_{b.name}": b.hinge_stiffness, f"hinge_damping_{b.name}": b.hinge_damping})
-        for p in range(len(m.pairs)):
-            s = pair_suffix(m, p)
-            val.update({f"contact_force{s}": 0.0, f"penetration{s}": 0.0, f"in_contact{s}": False})
+        val: dict = {"base_ax": 0.0, "base_az": 0.0}
+        if self.full:
+            for k, d in enumerate(m.dof_names):
+                val.update({f"angle_{d}": sc.angles[k], f"angular_velocity_{d}": sc.angular_velocities[k]})
+            for b in m.berries:
+                val[f"pedicel_force_{b.name}"] = 0.0
+                if not b.spherical:
+                    val.update({f"mass_{b.name}": b.mass, f"radius_{b.name}": b.radius,
+                                f"twig_length_{b.name}": b.twig_length, f"hinge_x_{b.name}": b.hinge_x,
+                                f"hinge_stiffness_{b.name}": b.hinge_stiffness,
+                                f"hinge_damping_{b.name}": b.hinge_damping})
+            for p in range(len(m.pairs)):
+                s = pair_suffix(m, p)
+                val.update({f"contact_force{s}": 0.0, f"penetration{s}": 0.0, f"in_contact{s}": False})
+        val.update({"active_pairs": 0, "max_contact_force": 0.0, "max_pedicel_force": 0.0,
+                    "berries_over_detachment_force": 0, "bruising_impacts": 0})
         law = m.pairs[0].law if m.pairs else None
         cp = m.couplings[0] if m.couplings else None
         val.update({"collision_count": 0, "peak_contact_force": 0.0, "dissipated_energy": 0.0, "detachment_risk": False,
@@ -65,8 +81,12 @@ class FmuCore:
         v = self.values
         doc = copy.deepcopy(self.doc)
         doc.pop("excitation", None)  # the inputs drive the rachis
-        for b in doc["berries"]:
+        for b in doc["berries"] if self.full else ():
             n = b["name"]
+            if b.get("kind", "planar") == "spherical":
+                b["angle"] = [v[f"angle_{n}_swing"], v[f"angle_{n}_tilt"]]
+                b["angular_velocity"] = [v[f"angular_velocity_{n}_swing"], v[f"angular_velocity_{n}_tilt"]]
+                continue
             for key in ("mass", "radius", "twig_length", "hinge_x", "hinge_stiffness", "hinge_damping"):
                 b[key] = v[f"{key}_{n}"]
             b["angle"] = v[f"angle_{n}"]
@@ -102,6 +122,7 @@ class FmuCore:
             self.solver = Solver(self.scene)
             self.solver.state.fl[core.T] = start_time
             self.error = None
+            self.bruising = 0
             self._update_outputs()
         except GrapefmuError as e:
             self.solver = None
@@ -117,36 +138,46 @@ class FmuCore:
             return f"communication step: expected a finite step > 0 s, got {dt!r}"
         if abs(t - self.solver.t) > 1e-9 * max(1.0, abs(t)):
             return f"currentCommunicationPoint {t!r} s does not continue from the FMU's time {self.solver.t!r} s"
-        for name in ("base_ax", "base_ay"):
+        for name in ("base_ax", "base_az"):
             a = self.values[name]
             if not (isinstance(a, (int, float)) and math.isfinite(a) and abs(a) <= MAX_INPUT):
                 return f"input {name} = {a!r}: expected a finite acceleration within ±{MAX_INPUT:g} m/s²; step refused"
         try:
-            self.solver.advance(dt, (float(self.values["base_ax"]), float(self.values["base_ay"])))
+            self.solver.advance(dt, (float(self.values["base_ax"]), float(self.values["base_az"])))
         except GrapefmuError as e:
             return f"step [{t:.9g}, {t + dt:.9g}] s refused: {e}"
+        th = self.scene.thresholds
+        imp = self.solver.take_impacts()
+        self.bruising += int(((imp.peak_force >= th.bruise_force) | (imp.dissipated >= th.bruise_energy)).sum())
         self._update_outputs()
         return None
 
     def _update_outputs(self) -> None:
         s, m, v = self.solver, self.model, self.values
         S = s.state
+        n, d, p = m.n_berries, m.n_dof, len(m.pairs)
         if not hasattr(self, "_obs"):
-            n, p = m.n_berries, len(m.pairs)
             sfx = [pair_suffix(m, k) for k in range(p)]
-            self._obs = (np.zeros((n, 2)), np.zeros(3 * n + 3 * p + 3))
-            self._real_names = ([f"angle_{b}" for b in m.names] + [f"angular_velocity_{b}" for b in m.names]
+            self._obs = (np.zeros((n, 3)), np.zeros(2 * d + n + 3 * p + 3))
+            self._real_names = ([f"angle_{x}" for x in m.dof_names] + [f"angular_velocity_{x}" for x in m.dof_names]
                                 + [f"pedicel_force_{b}" for b in m.names] + [f"contact_force{x}" for x in sfx]
                                 + [f"penetration{x}" for x in sfx])
             self._bool_names = [f"in_contact{x}" for x in sfx]
         fext, out = self._obs
         held = s._held or (0.0, 0.0)
         observe(S.y, S.mode, S.v_onset, S.smooth, held[0], held[1], s.M, S.peak_force, S.peak_tension, fext, out)
-        vals = out.tolist()
-        k = len(self._real_names)
-        v.update(zip(self._real_names, vals))
-        v.update(zip(self._bool_names, (x > 0.5 for x in vals[k: k + len(self._bool_names)])))
-        peak_f, peak_t, dissipated = vals[-3:]
+        if self.full:
+            vals = out.tolist()
+            k = len(self._real_names)
+            v.update(zip(self._real_names, vals))
+            v.update(zip(self._bool_names, (x > 0.5 for x in vals[k: k + len(self._bool_names)])))
+        o = 2 * d + n
+        peak_f, peak_t, dissipated = out[-3:].tolist()
+        v["active_pairs"] = int(np.count_nonzero(S.mode))
+        v["max_contact_force"] = float(out[o: o + p].max(initial=0.0))
+        v["max_pedicel_force"] = float(out[2 * d: o].max())
+        v["berries_over_detachment_force"] = int(np.count_nonzero(S.peak_tension > self.scene.thresholds.detachment_force))
+        v["bruising_impacts"] = self.bruising
         v["collision_count"] = int(S.it[core.N_IMPACTS])
         v["peak_contact_force"] = peak_f
         v["dissipated_energy"] = dissipated
@@ -155,12 +186,13 @@ class FmuCore:
     # --- FMU state --------------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {"values": dict(self.values), "solver": self.solver.get_state() if self.solver else None,
-                "error": self.error}
+                "error": self.error, "bruising": self.bruising}
 
     def set_state(self, state: dict) -> None:
         self.values.clear()  # in place: the FMI variables' getters and setters hold this dict
         self.values.update(state["values"])
         self.error = state["error"]
+        self.bruising = state["bruising"]
         if state["solver"] is not None:
             if self.solver is None:
                 self.solver = Solver(self.scene_from_parameters())
@@ -177,6 +209,7 @@ class FmuCore:
         arrays["value_data"] = np.array([float(state["values"][k]) for k in names])
         arrays["value_kind"] = np.array([type(state["values"][k]).__name__ for k in names])
         arrays["error"] = np.array(state["error"] or "")
+        arrays["bruising"] = np.array(state["bruising"])
         buf = io.BytesIO()
         np.savez(buf, **arrays)
         return buf.getvalue()
@@ -188,4 +221,4 @@ class FmuCore:
         values = {str(n): cast[str(k)](x) for n, x, k in zip(z["value_names"], z["value_data"], z["value_kind"])}
         solver = (SolverState(*(z[f"solver.{k}"].copy() for k in SolverState._fields))
                   if "solver.y" in z.files else None)
-        return {"values": values, "solver": solver, "error": str(z["error"]) or None}
+        return {"values": values, "solver": solver, "error": str(z["error"]) or None, "bruising": int(z["bruising"])}

@@ -8,13 +8,12 @@ commanded acceleration is r² a_nominal(s), so the gripper still ends where the 
 `python -m grapefmu_ros.controller --ros-args -p mode:=gentle`"""
 from __future__ import annotations
 
-import math
 import signal
 import sys
 
 import rclpy
 import rclpy.executors
-from geometry_msgs.msg import AccelStamped, WrenchStamped
+from geometry_msgs.msg import AccelStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -45,7 +44,6 @@ class HarvestController(Node):
         self.declare_parameter("tension_limit", 0.25, d(description="gentle: slow down above this pedicel tension, N"))
         self.declare_parameter("min_rate", 0.3, d(description="gentle: slowest progress rate (fraction of nominal)"))
         self.declare_parameter("settle", 0.5, d(description="time to keep commanding zero after the move, s"))
-        self.declare_parameter("pairs", 1, d(description="contact pairs whose wrench to wait for each step"))
         self.mode = self.get_parameter("mode").value
         self.dt = self.get_parameter("dt").value
         self.profile = pick_and_place(MOVES, start=0.1)
@@ -56,8 +54,8 @@ class HarvestController(Node):
         self.create_subscription(Float64MultiArray, "collision_events", self.on_event,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                                             reliability=ReliabilityPolicy.RELIABLE))
-        self.wrench_subs = []
-        self.latest = {"tension": (None, 0.0), "clock": None, "wrench": {}}
+        self.create_subscription(Float64MultiArray, "summary", self.on_summary, QOS)
+        self.latest = {"tension": (None, 0.0), "clock": None, "force": (None, 0.0)}
         self.sent_t = None    # stamp of the last command sent
         self.s = 0.0          # progress along the nominal profile, s
         self.rate = 1.0
@@ -67,20 +65,18 @@ class HarvestController(Node):
         self.collisions = 0
         self.done = False
 
-    def subscribe_wrenches(self):
-        for name, types in self.get_topic_names_and_types():
-            if name.endswith("/wrench") and "/contact/" in name and name not in [s.topic_name for s in self.wrench_subs]:
-                self.wrench_subs.append(self.create_subscription(
-                    WrenchStamped, name, lambda m, n=name: self.on_wrench(n, m), QOS))
-
     def on_tension(self, m):
         self.latest["tension"] = (_t(m.header.stamp), max(m.effort) if m.effort else 0.0)
         self.peak_tension = max(self.peak_tension, self.latest["tension"][1])
         self.try_command()
 
-    def on_wrench(self, name, m):
-        f = math.hypot(m.wrench.force.x, m.wrench.force.y)
-        self.latest["wrench"][name] = (_t(m.header.stamp), f)
+    def on_summary(self, m):
+        """The node's cluster totals: time and the largest contact force right now (SUMMARY_FIELDS)."""
+        fields = m.layout.dim[0].label.split(",") if m.layout.dim else []
+        if "time_s" not in fields:
+            return
+        f = m.data[fields.index("max_contact_force_n")]
+        self.latest["force"] = (m.data[fields.index("time_s")], f)
         self.peak_force = max(self.peak_force, f)
         self.try_command()
 
@@ -92,14 +88,14 @@ class HarvestController(Node):
         self.collisions += 1
 
     def ready(self) -> bool:
-        """The simulator has answered the last command: clock, tension and every wrench at its stamp."""
+        """The simulator has answered the last command: clock, tension and summary at its stamp."""
         tk = self.sent_t
         if tk is None or self.latest["clock"] is None or abs(self.latest["clock"] - tk) > 1e-9:
             return False
         if self.latest["tension"][0] is None or abs(self.latest["tension"][0] - tk) > 1e-9:
             return False
-        ws = self.latest["wrench"]
-        return len(ws) >= self.get_parameter("pairs").value and all(abs(t - tk) < 1e-9 for t, _ in ws.values())
+        tf = self.latest["force"][0]
+        return tf is not None and abs(tf - tk) < 1e-9
 
     def try_command(self):
         if not self.done and self.ready():
@@ -107,7 +103,7 @@ class HarvestController(Node):
 
     def command(self):
         t = self.next_t
-        force = max((f for _, f in self.latest["wrench"].values()), default=0.0)
+        force = self.latest["force"][1]
         tension = self.latest["tension"][1]
         if self.mode == "gentle":
             lf, lt = self.get_parameter("contact_force_limit").value, self.get_parameter("tension_limit").value
@@ -120,7 +116,7 @@ class HarvestController(Node):
         msg = AccelStamped()
         msg.header.stamp = stamp(t)
         msg.header.frame_id = "rachis"
-        msg.accel.linear.x, msg.accel.linear.y = float(a[0]), float(a[1])
+        msg.accel.linear.x, msg.accel.linear.z = float(a[0]), float(a[1])
         self.pub.publish(msg)
         self.sent_t = t
         self.s += self.dt * (self.rate if self.mode == "gentle" else 1.0)
@@ -130,9 +126,8 @@ class HarvestController(Node):
 
     def start(self, executor):
         """Wait for the simulator, then send the first command (stamp 0)."""
-        while self.pub.get_subscription_count() == 0 or not self.wrench_subs:
+        while self.pub.get_subscription_count() == 0:
             executor.spin_once(timeout_sec=0.1)
-            self.subscribe_wrenches()
         for _ in range(20):  # let the simulator's publishers match ours
             executor.spin_once(timeout_sec=0.05)
         self.command()

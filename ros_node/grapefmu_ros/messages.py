@@ -23,9 +23,11 @@ def stamp(t: float) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
-def labelled(labels: list[str], values) -> Float64MultiArray:
+def labelled(labels: list[str], values, rows: int | None = None) -> Float64MultiArray:
+    """values in rows of len(labels) fields; one row unless told (the field names label the dimension)."""
     m = Float64MultiArray()
-    m.layout.dim = [MultiArrayDimension(label=",".join(labels), size=len(labels), stride=len(labels))]
+    m.layout.dim = [MultiArrayDimension(label=",".join(labels), size=len(labels) if rows is None else rows,
+                                        stride=len(labels))]
     m.data = [float(v) for v in values]
     return m
 
@@ -55,7 +57,7 @@ def wrench(t, force_vec) -> WrenchStamped:
     m = WrenchStamped()
     m.header.stamp = stamp(t)
     m.header.frame_id = FRAME
-    m.wrench.force = Vector3(x=float(force_vec[0]), y=float(force_vec[1]), z=0.0)
+    m.wrench.force = Vector3(x=float(force_vec[0]), y=float(force_vec[1]), z=float(force_vec[2]))
     return m
 
 
@@ -66,8 +68,14 @@ def impact_message(imp, k) -> Float64MultiArray:
     return labelled(list(IMPACT_FIELDS), vals)
 
 
-def markers(t, base, hinges, berries, radii, pairs, forces, force_scale=0.02) -> MarkerArray:
-    """Rod, twigs, berries and contact-force arrows in the world frame (x right, y up)."""
+def _pt(v) -> Point:
+    return Point(x=float(v[0]), y=float(v[1]), z=float(v[2]))
+
+
+def markers(t, origin, hinges, berries, radii, pairs, forces, force_scale=0.02) -> MarkerArray:
+    """Rachis (origin to every hinge), twigs, berries and contact-force lines in the world frame
+    (REP-103, z up) for Foxglove or RViz. Three markers plus one sphere per berry, however many
+    pairs the cluster has."""
     arr = MarkerArray()
 
     def base_marker(mid, mtype, ns):
@@ -80,37 +88,33 @@ def markers(t, base, hinges, berries, radii, pairs, forces, force_scale=0.02) ->
         m.action = Marker.ADD
         m.pose.orientation.w = 1.0
         return m
-    rod = base_marker(0, Marker.LINE_STRIP, "rachis")
-    xs = [h[0] for h in hinges]
-    rod.points = [Point(x=float(min(xs) - 0.01), y=float(base[1])), Point(x=float(max(xs) + 0.01), y=float(base[1]))]
-    rod.scale.x = 0.004
+    rod = base_marker(0, Marker.LINE_LIST, "rachis")
+    for h in hinges:
+        rod.points += [_pt(origin), _pt(h)]
+    rod.scale.x = 0.003
     rod.color = ColorRGBA(r=0.4, g=0.3, b=0.2, a=1.0)
     arr.markers.append(rod)
     twigs = base_marker(1, Marker.LINE_LIST, "twigs")
     twigs.scale.x = 0.0015
     twigs.color = ColorRGBA(r=0.2, g=0.6, b=0.2, a=1.0)
     for h, b in zip(hinges, berries):
-        twigs.points += [Point(x=float(h[0]), y=float(h[1])), Point(x=float(b[0]), y=float(b[1]))]
+        twigs.points += [_pt(h), _pt(b)]
     arr.markers.append(twigs)
+    contact = base_marker(2, Marker.LINE_LIST, "contact")
+    contact.scale.x = 0.002
+    contact.color = ColorRGBA(r=0.9, g=0.2, b=0.1, a=1.0)
+    for (i, j), f in zip(pairs, forces):
+        if f > 0.0:
+            mid = (berries[i] + berries[j]) / 2
+            d = berries[j] - berries[i]
+            contact.points += [_pt(mid), _pt(mid + d / max(float(np.linalg.norm(d)), 1e-12) * f * force_scale)]
+    arr.markers.append(contact)
     for i, (b, r) in enumerate(zip(berries, radii)):
         s = base_marker(10 + i, Marker.SPHERE, "berries")
-        s.pose.position = Point(x=float(b[0]), y=float(b[1]))
+        s.pose.position = _pt(b)
         s.scale = Vector3(x=2 * r, y=2 * r, z=2 * r)
         s.color = ColorRGBA(r=0.45, g=0.1, b=0.5, a=0.9)
         arr.markers.append(s)
-    for p, ((i, j), f) in enumerate(zip(pairs, forces)):
-        a = base_marker(100 + p, Marker.ARROW, "contact")
-        if f <= 0.0:
-            a.action = Marker.DELETE
-        else:
-            mid = (berries[i] + berries[j]) / 2
-            d = berries[j] - berries[i]
-            n = d / max(math.hypot(*d), 1e-12)
-            a.points = [Point(x=float(mid[0]), y=float(mid[1])),
-                        Point(x=float(mid[0] + n[0] * f * force_scale), y=float(mid[1] + n[1] * f * force_scale))]
-            a.scale = Vector3(x=0.002, y=0.004, z=0.004)
-            a.color = ColorRGBA(r=0.9, g=0.2, b=0.1, a=1.0)
-        arr.markers.append(a)
     return arr
 
 
@@ -121,12 +125,3 @@ def diagnostics(t, level: int, message: str, values: dict) -> DiagnosticArray:
     st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
     arr.status = [st]
     return arr
-
-
-def positions(y, berry, base):
-    """World positions of hinges and berry centres (N, 2) each."""
-    n = berry.shape[0]
-    q = y[:n]
-    hinges = np.column_stack([berry[:, 3] + base[0], np.full(n, base[1])])
-    centres = hinges + np.column_stack([berry[:, 2] * np.sin(q), -berry[:, 2] * np.cos(q)])
-    return hinges, centres

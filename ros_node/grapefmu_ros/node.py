@@ -28,7 +28,8 @@ from geometry_msgs.msg import WrenchStamped
 
 from grapefmu import GrapefmuError, Solver, load_scene
 from grapefmu.cli import default_scene_path
-from grapefmu.physics.dynamics import observe
+from grapefmu.physics.dynamics import centres, observe
+from grapefmu.recording import topics as T
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.solver import core
 
@@ -73,11 +74,14 @@ class SimulatorNode(Node):
         self.scene = load_scene(gp("scene"))
         m = self.scene.model
         self.names = m.names
-        self.pair_topics = [f"contact/{m.pair_name(p)}/wrench" for p in range(len(m.pairs))]
+        self.joints = T.joint_names(m)
+        self.pair_topics = [f"contact/{m.pair_name(p)}/wrench" for p in range(len(m.pairs))] if T.per_pair_topics(m) else []
         self.recorder = McapRecorder(gp("record"), metadata(self.scene, self.mode, self.rate)) if gp("record") else None
         self.pub_js = self.create_publisher(JointState, "joint_states", STATE_QOS)
         self.pub_wrench = [self.create_publisher(WrenchStamped, t, STATE_QOS) for t in self.pair_topics]
+        self.pub_contacts = self.create_publisher(Float64MultiArray, "contacts", STATE_QOS)
         self.pub_tension = self.create_publisher(JointState, "pedicel_tension", STATE_QOS)
+        self.pub_summary = self.create_publisher(Float64MultiArray, "summary", STATE_QOS)
         self.pub_events = self.create_publisher(Float64MultiArray, "collision_events", EVENTS_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, "markers", 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
@@ -110,9 +114,10 @@ class SimulatorNode(Node):
         self._last_marker = -math.inf
         self._pose = []
         self._pose_acc = np.zeros(2)
-        npair = max(len(self.scene.model.pairs), 1)
-        self._fext = np.zeros((self.scene.model.n_berries, 2))
-        self._obs = np.zeros(3 * self.scene.model.n_berries + 3 * npair + 3)
+        m = self.scene.model
+        self._fext = np.zeros((m.n_berries, 3))
+        self._pos = np.zeros((m.n_berries, 3))
+        self._obs = np.zeros(2 * m.n_dof + m.n_berries + 3 * len(m.pairs) + 3)
         self.publish_state()
 
     def advance(self, dt: float) -> bool:
@@ -129,7 +134,7 @@ class SimulatorNode(Node):
         applied = AccelStamped()
         applied.header.stamp = M.stamp(t)
         applied.header.frame_id = M.FRAME
-        applied.accel.linear.x, applied.accel.linear.y = self.accel
+        applied.accel.linear.x, applied.accel.linear.z = self.accel
         self.emit(self.pub_applied, "rachis/accel_applied", applied, t)
         self.publish_state()
         imp = self.solver.take_impacts()
@@ -146,24 +151,34 @@ class SimulatorNode(Node):
         b = s.M.berry
         observe(S.y, S.mode, S.v_onset, S.smooth, self.accel[0], self.accel[1], s.M, S.peak_force, S.peak_tension,
                 self._fext, self._obs)
-        n, npair = len(self.names), len(self.pair_topics)
-        q, w = S.y[:n], S.y[n: 2 * n]
-        effort = -b[:, 4] * q - b[:, 5] * w  # torque the viscoelastic hinge exerts, N·m
-        self.emit(self.pub_js, "joint_states", M.joint_state(t, self.names, q, w, effort), t)
-        tension = self._obs[2 * n: 3 * n]
+        model = self.scene.model
+        n, d, npair = model.n_berries, model.n_dof, len(model.pairs)
+        q, w = S.y[:d], S.y[d: 2 * d]
+        effort = T.hinge_effort(model, q, w)
+        self.emit(self.pub_js, "joint_states", M.joint_state(t, self.joints, q, w, effort), t)
+        o = 2 * d + n
+        tension = self._obs[2 * d: o]
         self.emit(self.pub_tension, "pedicel_tension", M.tension(t, self.names, tension), t)
+        forces, pen, touching = self._obs[o: o + npair], self._obs[o + npair: o + 2 * npair], S.mode != 0
         base = S.y[s.layout.base]
-        hinges, centres = M.positions(S.y, b, base)
-        forces = self._obs[3 * n: 3 * n + npair]
-        pairs = [(p.i, p.j) for p in self.scene.model.pairs]
-        for p, (i, j) in enumerate(pairs):
-            d = centres[j] - centres[i]
-            self.emit(self.pub_wrench[p], self.pair_topics[p], M.wrench(t, forces[p] * d / max(np.hypot(*d), 1e-12)), t)
+        centres(S.y, s.M, self._pos)
+        origin = np.array([base[0], 0.0, base[1]])
+        hinges = b[:, [3, 6, 7]] + origin
+        berries = self._pos + origin
+        pairs = [(p.i, p.j) for p in model.pairs]
+        for p, topic in enumerate(self.pair_topics):
+            i, j = pairs[p]
+            dv = berries[j] - berries[i]
+            self.emit(self.pub_wrench[p], topic, M.wrench(t, forces[p] * dv / max(np.linalg.norm(dv), 1e-12)), t)
+        self.emit(self.pub_contacts, "contacts", M.labelled(list(T.CONTACT_FIELDS), T.contact_values(forces, pen, touching),
+                                                            rows=int(touching.sum())), t)
+        peak_f, peak_t, dissipated = self._obs[o + 3 * npair: o + 3 * npair + 3]
+        self.emit(self.pub_summary, "summary", M.labelled(list(T.SUMMARY_FIELDS), T.summary_values(
+            t, forces, tension, peak_f, peak_t, dissipated, touching)), t)
         rate = self.get_parameter("marker_rate_hz").value
         if rate > 0 and t - self._last_marker >= 1.0 / rate - 1e-12:
             self._last_marker = t
-            self.emit(self.pub_markers, "markers",
-                      M.markers(t, base, hinges, centres, b[:, 1], pairs, forces), t)
+            self.emit(self.pub_markers, "markers", M.markers(t, origin, hinges, berries, b[:, 1], pairs, forces), t)
         if self.pub_clock is not None:
             self.emit(self.pub_clock, "/clock", Clock(clock=M.stamp(t)), t)
 
@@ -186,7 +201,7 @@ class SimulatorNode(Node):
         t_in = stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec)
         if self.recorder:
             self.recorder.write("rachis/accel", msg, to_ns(max(t_in, 0.0)))
-        self._input(msg.accel.linear.x, msg.accel.linear.y, t_in, "rachis/accel")
+        self._input(msg.accel.linear.x, msg.accel.linear.z, t_in, "rachis/accel")
 
     def _input(self, ax, ay, t_in, what):
         if not self._valid(ax, ay, what):
@@ -210,7 +225,7 @@ class SimulatorNode(Node):
         t = stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec)
         if self.recorder:
             self.recorder.write("rachis/pose", msg, to_ns(max(t, 0.0)))
-        p = np.array([msg.pose.position.x, msg.pose.position.y])
+        p = np.array([msg.pose.position.x, msg.pose.position.z])
         if not np.all(np.isfinite(p)):
             self._valid(math.nan, math.nan, "rachis/pose")
             return

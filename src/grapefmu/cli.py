@@ -90,7 +90,7 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
         from grapefmu_fmu.build import build_fmu
     except ImportError as e:
         raise GrapefmuError(f"build-fmu needs the FMU extra (pip install 'grapefmu[fmu]'): {e}") from None
-    out = build_fmu(a.scene or default_scene_path(), a.output, a.fmi)
+    out = build_fmu(a.scene or default_scene_path(), a.output, a.fmi, a.outputs)
     print(f"wrote {out} (FMI {a.fmi}.0 co-simulation)")
     return 0
 
@@ -134,6 +134,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("scene", nargs="?", help="scene TOML (default: the packaged default scene)")
     b.add_argument("-o", "--output", required=True, help="the .fmu file to write")
     b.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
+    b.add_argument("--outputs", choices=("full", "summary"),
+                   help="per angle, berry and pair, or cluster totals only (default: full up to 16 berries and pairs)")
     b.set_defaults(func=cmd_build_fmu)
     r = sub.add_parser("replay", help="check a recording by re-simulating it, or republish it")
     r.add_argument("recording", help="an MCAP file written by grapefmu simulate or the ROS node")

@@ -1,12 +1,13 @@
 """Read a scene from TOML, validating every value (one clear error naming the key and range)."""
 from __future__ import annotations
 
-import itertools
 import math
 import re
 import tomllib
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from ..errors import SceneError
 from . import excitation as exc
@@ -20,8 +21,10 @@ NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
 MAX_OVERLAP_FRACTION = 0.2
 
 TOP_KEYS = {"name", "gravity", "berries", "contact", "coupling", "excitation", "solver", "thresholds"}
-BERRY_KEYS = {"name", "mass", "radius", "twig_length", "hinge_x", "hinge_stiffness", "hinge_damping",
-              "angle", "angular_velocity"}
+BERRY_KEYS = {"name", "mass", "radius", "twig_length", "hinge_x", "hinge", "hinge_stiffness", "hinge_damping",
+              "angle", "angular_velocity", "kind", "azimuth", "rest_angles"}
+#: a spherical twig this close to swinging sideways flat (cos s → 0) is outside the model's chart
+MAX_SWING = math.radians(80.0)
 CONTACT_KEYS = {"law", "stiffness", "effective_modulus", "damping", "restitution", "allow_tension", "pairs"}
 COUPLING_KEYS = {"stiffness", "damping", "pairs"}
 EXCITATION_KEYS = {
@@ -63,7 +66,8 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     names = [b.name for b in berries]
     pairs = _contact(doc.get("contact"), berries) if "contact" in doc else ()
     couplings = _coupling(doc["coupling"], berries) if "coupling" in doc else ()
-    model = Model(tuple(berries), tuple(pairs), tuple(couplings), gravity)
+    pairs, pruned = _reachable(pairs, berries)
+    model = Model(tuple(berries), tuple(pairs), tuple(couplings), gravity, pruned)
     solver = _solver(doc.get("solver", {}))
     excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)
     thresholds = _thresholds(doc.get("thresholds", {}))
@@ -82,9 +86,11 @@ def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
         key = f"berries[{n}]"
         v.table(key, b)
         v.no_unknown_keys(key, b, BERRY_KEYS)
-        for req in ("name", "mass", "radius", "twig_length", "hinge_x"):
+        for req in ("name", "mass", "radius", "twig_length"):
             if req not in b:
                 raise SceneError(f"{key}.{req}", "missing (required)")
+        if ("hinge_x" in b) == ("hinge" in b):
+            raise SceneError(f"{key}.hinge", "give hinge_x (on the rod) or hinge = [x, y, z], exactly one")
         nm = b["name"]
         if not isinstance(nm, str) or not NAME_RE.match(nm):
             raise SceneError(f"{key}.name", f"expected an identifier of letters, digits and _ (at most 32), got {nm!r}")
@@ -96,13 +102,66 @@ def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
         length = v.number(f"{key}.twig_length", b["twig_length"], 0.0, 1.0, lo_open=True, unit="m")
         if radius >= length:
             raise SceneError(f"{key}.radius", f"must be smaller than twig_length ({length:g} m), got {radius:g} m")
-        hx = v.number(f"{key}.hinge_x", b["hinge_x"], -1.0, 1.0, unit="m")
+        if "hinge_x" in b:
+            hinge = (v.number(f"{key}.hinge_x", b["hinge_x"], -1.0, 1.0, unit="m"), 0.0, 0.0)
+        else:
+            hinge = v.vector(f"{key}.hinge", b["hinge"], 3, -1.0, 1.0, "m")
         kh = v.number(f"{key}.hinge_stiffness", b.get("hinge_stiffness", 0.0), 0.0, 1e3, unit="N·m/rad")
         ch = v.number(f"{key}.hinge_damping", b.get("hinge_damping", 0.0), 0.0, 1e3, unit="N·m·s/rad")
-        angles.append(v.number(f"{key}.angle", b.get("angle", 0.0), -math.pi, math.pi, unit="rad"))
-        rates.append(v.number(f"{key}.angular_velocity", b.get("angular_velocity", 0.0), -1e3, 1e3, unit="rad/s"))
-        berries.append(Berry(nm, mass, radius, length, hx, kh, ch))
+        spherical = v.choice(f"{key}.kind", b.get("kind", "planar"), ("planar", "spherical")) == "spherical"
+        nd = 2 if spherical else 1
+        if not spherical:
+            for k in ("azimuth", "rest_angles"):
+                if k in b:
+                    raise SceneError(f"{key}.{k}", "only for kind = \"spherical\" berries")
+        azimuth = v.number(f"{key}.azimuth", b.get("azimuth", 0.0), -2 * math.pi, 2 * math.pi, unit="rad")
+        rest = v.vector(f"{key}.rest_angles", b.get("rest_angles", [0.0, 0.0]), 2, -2 * math.pi, 2 * math.pi, "rad")
+        q = _angles(f"{key}.angle", b.get("angle", [0.0] * nd if spherical else 0.0), nd, math.pi, "rad")
+        w = _angles(f"{key}.angular_velocity", b.get("angular_velocity", [0.0] * nd if spherical else 0.0), nd, 1e3,
+                    "rad/s")
+        if spherical and abs(q[0]) > MAX_SWING:
+            raise SceneError(f"{key}.angle[0]", f"a spherical berry's swing must stay within ±{math.degrees(MAX_SWING):g}° "
+                             f"(±{MAX_SWING:.4g} rad), got {q[0]!r}")
+        angles.extend(q)
+        rates.extend(w)
+        berries.append(Berry(nm, mass, radius, length, hinge[0], kh, ch, hinge[1], hinge[2], spherical, azimuth, rest))
     return berries, angles, rates
+
+
+def _angles(key: str, raw: Any, nd: int, bound: float, unit: str) -> tuple[float, ...]:
+    """One number for a planar berry, [swing, tilt] for a spherical one."""
+    if nd == 1:
+        return (v.number(key, raw, -bound, bound, unit=unit),)
+    return v.vector(key, raw, 2, -bound, bound, unit)
+
+
+def _reachable(pairs: list[ContactPair], berries: list[Berry]) -> tuple[list[ContactPair], int]:
+    """Drop pairs that can never touch: the rachis is rigid, so hinges keep their distance, and
+    berries farther apart than l_i + l_j + r_i + r_j at the hinges never meet."""
+    keep = [pr for pr in pairs if _hinge_distance(berries[pr.i], berries[pr.j]) <= _reach(berries[pr.i]) + _reach(berries[pr.j])]
+    return keep, len(pairs) - len(keep)
+
+
+def _reach(b: Berry) -> float:
+    return b.twig_length + b.radius
+
+
+def _hinge_distance(a: Berry, b: Berry) -> float:
+    return math.dist((a.hinge_x, a.hinge_y, a.hinge_z), (b.hinge_x, b.hinge_y, b.hinge_z))
+
+
+def _all_pairs(berries: list[Berry]) -> list[tuple[int, int]]:
+    """Every pair within reach, found along the sorted x axis so a long row is not an N² search."""
+    reach = 2 * max((_reach(b) for b in berries), default=0.0)
+    order = sorted(range(len(berries)), key=lambda i: berries[i].hinge_x)
+    out = []
+    for a, i in enumerate(order):
+        for j in order[a + 1:]:
+            if berries[j].hinge_x - berries[i].hinge_x > reach:
+                break
+            if _hinge_distance(berries[i], berries[j]) <= _reach(berries[i]) + _reach(berries[j]):
+                out.append((min(i, j), max(i, j)))
+    return sorted(out)
 
 
 def _pair_list(key: str, raw: Any, berries: list[Berry], default: list[tuple[int, int]]) -> list[tuple[int, int]]:
@@ -146,7 +205,7 @@ def _contact(raw: Any, berries: list[Berry]) -> list[ContactPair]:
         raise SceneError(f"{key}.{'damping' if 'damping' in raw else 'restitution'}",
                          "the hertz law is elastic; use hunt-crossley for a damped Hertz contact")
     e = v.number(f"{key}.restitution", raw["restitution"], 0.0, 1.0, lo_open=True) if "restitution" in raw else None
-    all_pairs = list(itertools.combinations(range(len(berries)), 2))
+    all_pairs = _all_pairs(berries)
     pairs = []
     for i, j in _pair_list(f"{key}.pairs", raw.get("pairs"), berries, all_pairs):
         bi, bj = berries[i], berries[j]
@@ -179,7 +238,11 @@ def _coupling(raw: Any, berries: list[Berry]) -> list[Coupling]:
     c = v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e4, unit="N·s/m")
     order = sorted(range(len(berries)), key=lambda i: berries[i].hinge_x)
     neighbours = [tuple(sorted(p)) for p in zip(order, order[1:])]
-    return [Coupling(i, j, k, c) for i, j in _pair_list(f"{key}.pairs", raw.get("pairs"), berries, neighbours)]
+    out = [Coupling(i, j, k, c) for i, j in _pair_list(f"{key}.pairs", raw.get("pairs"), berries, neighbours)]
+    for cp in out:
+        if berries[cp.i].spherical or berries[cp.j].spherical:
+            raise SceneError(f"{key}.pairs", "the k3/c3 coupling acts on the horizontal separation of planar berries only")
+    return out
 
 
 def _solver(raw: Any) -> SolverSettings:
@@ -270,13 +333,20 @@ def _thresholds(raw: Any) -> Thresholds:
 
 def _check_overlap(model: Model, angles: list[float], names: list[str]) -> None:
     """Reject starts (or hanging rest states) that overlap far beyond what a contact law can mean."""
-    for pr in model.pairs:
-        bi, bj = model.berries[pr.i], model.berries[pr.j]
-        bound = MAX_OVERLAP_FRACTION * min(bi.radius, bj.radius)
-        for label, qi, qj in (("initial", angles[pr.i], angles[pr.j]), ("hanging rest", 0.0, 0.0)):
-            dx = bj.hinge_x + bj.twig_length * math.sin(qj) - bi.hinge_x - bi.twig_length * math.sin(qi)
-            dy = -bj.twig_length * math.cos(qj) + bi.twig_length * math.cos(qi)
-            overlap = bi.radius + bj.radius - math.hypot(dx, dy)
+    from ..physics.dynamics import centres
+
+    M = model.arrays
+    nd = model.n_dof
+    states = [("initial", np.r_[angles, np.zeros(nd)])]
+    if model.planar:
+        states.append(("hanging rest", np.zeros(2 * nd)))
+    for label, y in states:
+        pos = np.zeros((model.n_berries, 3))
+        centres(y, M, pos)
+        for pr in model.pairs:
+            bi, bj = model.berries[pr.i], model.berries[pr.j]
+            bound = MAX_OVERLAP_FRACTION * min(bi.radius, bj.radius)
+            overlap = bi.radius + bj.radius - float(np.linalg.norm(pos[pr.j] - pos[pr.i]))
             if overlap > bound:
                 raise SceneError(
                     f"berries[{pr.j}].hinge_x" if label == "hanging rest" else f"berries[{pr.j}].angle",

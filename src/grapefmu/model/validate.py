@@ -60,3 +60,9 @@ def vector2(key: str, value: Any, lo: float, hi: float, unit: str = "") -> tuple
     if not isinstance(value, (list, tuple)) or len(value) != 2:
         raise SceneError(key, f"expected a pair [x, y] of numbers in [{lo:g}, {hi:g}] {unit}, got {value!r}")
     return (number(f"{key}[0]", value[0], lo, hi, unit=unit), number(f"{key}[1]", value[1], lo, hi, unit=unit))
+
+
+def vector(key: str, value: Any, size: int, lo: float, hi: float, unit: str = "") -> tuple[float, ...]:
+    if not isinstance(value, (list, tuple)) or len(value) != size:
+        raise SceneError(key, f"expected a list of {size} numbers in [{lo:g}, {hi:g}] {unit}, got {value!r}")
+    return tuple(number(f"{key}[{k}]", x, lo, hi, unit=unit) for k, x in enumerate(value))

@@ -1,10 +1,12 @@
 """Write a finished run to MCAP with the same topics the ROS node publishes.
 
-Topics (relative names, frame `rachis`):
-  rachis/accel                     geometry_msgs/AccelStamped   the input a(t), m/s²
-  joint_states                     sensor_msgs/JointState       twig_<berry>: angle, rate, hinge torque (effort)
-  contact/<a>_<b>/wrench           geometry_msgs/WrenchStamped  force on berry b from berry a, N
+Topics (relative names, frame `rachis`, z up; see topics.py):
+  rachis/accel                     geometry_msgs/AccelStamped   the input a(t) in linear.x and linear.z, m/s²
+  joint_states                     sensor_msgs/JointState       twig_<angle>: angle, rate, hinge torque (effort)
+  contact/<a>_<b>/wrench           geometry_msgs/WrenchStamped  force on berry b from berry a, N (small scenes)
+  contacts                         std_msgs/Float64MultiArray   pair, force, penetration of each pair in contact
   pedicel_tension                  sensor_msgs/JointState       twig_<berry>: tension in effort, N
+  summary                          std_msgs/Float64MultiArray   cluster totals (topics.SUMMARY_FIELDS)
   collision_events                 std_msgs/Float64MultiArray   one message per impact, fields in dim labels
 A metadata record `grapefmu` holds the scene TOML, solver settings and version, so the run can be re-simulated.
 """
@@ -19,6 +21,7 @@ from .. import __version__
 from ..results.run import Run
 from ..results.writers import atomic_path
 from .msgdefs import MSGDEFS
+from .topics import CONTACT_FIELDS, SUMMARY_FIELDS, contact_values, hinge_effort, joint_names, per_pair_topics
 
 FRAME = "rachis"
 IMPACT_FIELDS = ("pair_index", "onset_s", "end_s", "duration_s", "approach_speed_mps", "separation_speed_mps",
@@ -61,11 +64,17 @@ def write_mcap(run: Run, path: str | Path) -> None:
     from mcap_ros2.writer import Writer
 
     m = run.scene.model
-    b = m.arrays.berry
-    joints = [f"twig_{n}" for n in m.names]
+    joints = joint_names(m)
+    berry_joints = [f"twig_{n}" for n in m.names]
     q, w = run.angles, run.angular_velocities
-    effort = -b[None, :, 4] * q - b[None, :, 5] * w
+    effort = hinge_effort(m, q, w)
     pos = run.positions
+    wrenches = per_pair_topics(m)
+    in_contact = run.mode != 0
+    e = run.energy
+    dissipated = e["dissipated_hinge"] + e["dissipated_coupling"] + e["dissipated_contact"]
+    peak_f = np.maximum.accumulate(run.contact_force.max(axis=1, initial=0.0))
+    peak_t = np.maximum.accumulate(run.pedicel_force.max(axis=1))
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         wr = Writer(fh)
         schema = {k: wr.register_msgdef(k, v) for k, v in MSGDEFS.items()}
@@ -74,22 +83,28 @@ def write_mcap(run: Run, path: str | Path) -> None:
         for s, t in enumerate(run.t):
             ns = int(round(t * 1e9))
             messages.append((ns, 0, "rachis/accel", "geometry_msgs/msg/AccelStamped",
-                             {"header": _header(t), "accel": {"linear": {"x": run.accel[s, 0], "y": run.accel[s, 1], "z": 0.0},
+                             {"header": _header(t), "accel": {"linear": {"x": run.accel[s, 0], "y": 0.0, "z": run.accel[s, 1]},
                                                               "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}}))
             messages.append((ns, 1, "joint_states", "sensor_msgs/msg/JointState",
                              {"header": _header(t), "name": joints, "position": q[s].tolist(),
                               "velocity": w[s].tolist(), "effort": effort[s].tolist()}))
-            for p in range(len(m.pairs)):
+            for p in range(len(m.pairs)) if wrenches else ():
                 i, j = m.pairs[p].i, m.pairs[p].j
                 d = pos[s, j] - pos[s, i]
-                nrm = d / max(np.hypot(*d), 1e-300)
-                f = run.contact_force[s, p]
+                f = run.contact_force[s, p] * d / max(float(np.linalg.norm(d)), 1e-300)
                 messages.append((ns, 2, f"contact/{m.pair_name(p)}/wrench", "geometry_msgs/msg/WrenchStamped",
-                                 {"header": _header(t), "wrench": {"force": {"x": f * nrm[0], "y": f * nrm[1], "z": 0.0},
+                                 {"header": _header(t), "wrench": {"force": {"x": f[0], "y": f[1], "z": f[2]},
                                                                    "torque": {"x": 0.0, "y": 0.0, "z": 0.0}}}))
+            vals = contact_values(run.contact_force[s], run.penetration[s], in_contact[s])
+            msg = labelled_array(list(CONTACT_FIELDS), vals)
+            msg["layout"]["dim"][0]["size"] = len(vals) // 3
+            messages.append((ns, 2, "contacts", "std_msgs/msg/Float64MultiArray", msg))
             messages.append((ns, 3, "pedicel_tension", "sensor_msgs/msg/JointState",
-                             {"header": _header(t), "name": joints, "position": [], "velocity": [],
+                             {"header": _header(t), "name": berry_joints, "position": [], "velocity": [],
                               "effort": run.pedicel_force[s].tolist()}))
+            messages.append((ns, 3, "summary", "std_msgs/msg/Float64MultiArray", labelled_array(list(SUMMARY_FIELDS), [
+                t, in_contact[s].sum(), run.contact_force[s].max(initial=0.0), run.pedicel_force[s].max(),
+                peak_f[s], peak_t[s], dissipated[s]])))
         for t, msg in impact_messages(run):
             messages.append((int(round(t * 1e9)), 4, "collision_events", "std_msgs/msg/Float64MultiArray", msg))
         messages.sort(key=lambda x: (x[0], x[1]))

@@ -123,7 +123,7 @@ def check(path: str | Path) -> CheckResult:
             t_end = stamp_seconds(m.header.stamp.sec, m.header.stamp.nanosec)
             if t_end < solver.t:  # the node was reset
                 solver = Solver(scene)
-            solver.advance(t_end - solver.t, (m.accel.linear.x, m.accel.linear.y))
+            solver.advance(t_end - solver.t, (m.accel.linear.x, m.accel.linear.z))
             if t_end in recorded:
                 q, w = recorded[t_end]
                 dq = max(dq, float(np.abs(solver.angles - q).max()))

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from ..model.model import Scene
-from ..physics.dynamics import derived
+from ..physics.dynamics import centres, derived
 from ..physics.layout import Layout, layout
 from ..solver import core
 
@@ -68,11 +68,9 @@ class Run:
         open_rows = []
         for p in range(S.mode.shape[0]):
             if S.mode[p] != 0:
-                j = solver.layout.impulse.start + p
-                d = solver.layout.d_contact.start + p
                 o = S.imp_open[p]
                 open_rows.append([p, o[core.O_ONSET], S.fl[core.T], o[core.O_SPEED], o[core.O_PEAK], o[core.O_TPEAK],
-                                  S.y[j] - o[core.O_J], S.y[d] - o[core.O_D], np.nan])
+                                  S.pair_int[p, 0] - o[core.O_J], S.pair_int[p, 1] - o[core.O_D], np.nan])
         allrows = np.vstack([rows.reshape(-1, core.IMPACT_COLUMNS)] + [np.array(open_rows).reshape(-1, core.IMPACT_COLUMNS)])
         ongoing = np.r_[np.zeros(len(rows), bool), np.ones(len(open_rows), bool)]
         t, y, mode, acc, vo, sm = samples
@@ -84,7 +82,7 @@ class Run:
     @property
     def layout(self) -> Layout:
         m = self.scene.model
-        return layout(m.n_berries, len(m.couplings), len(m.pairs))
+        return layout(m.n_berries, m.n_dof, len(m.couplings))
 
     @property
     def angles(self) -> np.ndarray:
@@ -98,14 +96,21 @@ class Run:
     def base_displacement(self) -> np.ndarray:
         return self.y[:, self.layout.base]
 
-    @property
+    @cached_property
     def positions(self) -> np.ndarray:
-        """World positions of the berry centres (n, N, 2): base displacement + hinge + twig."""
-        b = self.scene.model.arrays.berry
-        q = self.angles
-        px = self.base_displacement[:, None, 0] + b[None, :, 3] + b[None, :, 2] * np.sin(q)
-        py = self.base_displacement[:, None, 1] - b[None, :, 2] * np.cos(q)
-        return np.stack([px, py], axis=-1)
+        """World positions of the berry centres (n, N, 3), z up: base displacement + hinge + twig."""
+        M = self.scene.model.arrays
+        out = np.zeros((len(self.t), M.berry.shape[0], 3))
+        for k in range(len(self.t)):
+            centres(self.y[k], M, out[k])
+        out[:, :, 0] += self.base_displacement[:, None, 0]
+        out[:, :, 2] += self.base_displacement[:, None, 1]
+        return out
+
+    @property
+    def active_pairs(self) -> np.ndarray:
+        """Pairs in contact at each sample."""
+        return (self.mode != 0).sum(axis=1)
 
     @cached_property
     def _derived(self) -> tuple[np.ndarray, ...]:
@@ -146,7 +151,7 @@ class Run:
         out = {name: e[:, k] for k, name in enumerate(ENERGY_TERMS)}
         out["dissipated_hinge"] = self.y[:, lay.d_hinge].sum(axis=1)
         out["dissipated_coupling"] = self.y[:, lay.d_coupling].sum(axis=1)
-        out["dissipated_contact"] = self.y[:, lay.d_contact].sum(axis=1)
+        out["dissipated_contact"] = self.y[:, lay.d_contact]
         out["base_work"] = self.y[:, lay.work]
         stored = e.sum(axis=1)
         dissipated = out["dissipated_hinge"] + out["dissipated_coupling"] + out["dissipated_contact"]
@@ -167,6 +172,21 @@ class Run:
     def collision_count(self) -> int:
         return len(self.impacts)
 
+    def dissipated_per_berry(self) -> np.ndarray:
+        """Energy each berry dissipated (J): its hinge, plus half of every contact and coupling it is in."""
+        m = self.scene.model
+        lay = self.layout
+        out = self.y[-1, lay.d_hinge].copy()
+        for k, c in enumerate(m.couplings):
+            d = self.y[-1, lay.d_coupling.start + k]
+            out[c.i] += 0.5 * d
+            out[c.j] += 0.5 * d
+        imp = self.impacts
+        for p, d in zip(imp.pair, imp.dissipated):
+            out[m.pairs[p].i] += 0.5 * d
+            out[m.pairs[p].j] += 0.5 * d
+        return out
+
     def indicators(self) -> dict[str, Any]:
         th = self.scene.thresholds
         imp = self.impacts
@@ -177,6 +197,7 @@ class Run:
         return {
             "detachment_risk": bool(overload),
             "berries_over_detachment_force": overload,
+            "n_berries_over_detachment_force": len(overload),
             "bruising_impacts": int(bruising.sum()),
             "fatigue_impacts": int(fatigue.sum()),
             "damage_risk": bool(bruising.any()),
@@ -184,40 +205,56 @@ class Run:
 
     def summary(self) -> dict[str, Any]:
         imp = self.impacts
+        per_berry = self.dissipated_per_berry()
         return {
             "t_end": float(self.t[-1]),
             "samples": len(self.t),
+            "berries": self.scene.model.n_berries,
             "collision_count": self.collision_count,
             "peak_contact_force": float(self.peak_force.max()) if self.peak_force.size else 0.0,
             "peak_pedicel_force": float(self.peak_tension.max()),
             "max_impact_energy": float(imp.dissipated.max()) if len(imp) else 0.0,
             "energy_dissipated": float(self.energy["dissipated_hinge"][-1] + self.energy["dissipated_coupling"][-1]
                                        + self.energy["dissipated_contact"][-1]),
+            "max_dissipated_per_berry": float(per_berry.max()),
+            "mean_dissipated_per_berry": float(per_berry.mean()),
+            "max_active_pairs": int(self.active_pairs.max()) if len(self.t) else 0,
             **self.indicators(),
-            **{k: v for k, v in self.stats.items() if k in ("method", "steps", "rejected", "rhs_evaluations",
-                                                            "zeno_guard_activations", "wall_time")},
+            **{k: v for k, v in self.stats.items() if k in (
+                "method", "steps", "rejected", "rhs_evaluations", "zeno_guard_activations", "wall_time",
+                "degrees_of_freedom", "candidate_pairs", "near_pairs_mean", "near_list_rebuilds")},
         }
+
+    @property
+    def touched_pairs(self) -> list[int]:
+        """Pairs that were in contact at some point: the only ones whose columns are not all zero."""
+        return sorted(set(self.impacts.pair.tolist()) | set(np.flatnonzero(self.mode.any(axis=0)).tolist()))
 
     # --- columns for writers ----------------------------------------------------------------------
     def columns(self) -> dict[str, np.ndarray]:
+        """Per angle, per berry, per pair that touched (a cluster has thousands of idle candidate
+        pairs), the cluster's active-pair count and the energy ledger."""
         m = self.scene.model
         cols = {"time": self.t}
-        for i, name in enumerate(m.names):
-            cols[f"angle_{name}"] = self.angles[:, i]
-        for i, name in enumerate(m.names):
-            cols[f"angular_velocity_{name}"] = self.angular_velocities[:, i]
+        for k, name in enumerate(m.dof_names):
+            cols[f"angle_{name}"] = self.angles[:, k]
+        for k, name in enumerate(m.dof_names):
+            cols[f"angular_velocity_{name}"] = self.angular_velocities[:, k]
         for i, name in enumerate(m.names):
             cols[f"pedicel_force_{name}"] = self.pedicel_force[:, i]
-        for p in range(len(m.pairs)):
+        touched = self.touched_pairs
+        for p in touched:
             cols[f"contact_force_{m.pair_name(p)}"] = self.contact_force[:, p]
-        for p in range(len(m.pairs)):
+        for p in touched:
             cols[f"penetration_{m.pair_name(p)}"] = self.penetration[:, p]
         pos = self.positions
         for i, name in enumerate(m.names):
             cols[f"x_{name}"] = pos[:, i, 0]
             cols[f"y_{name}"] = pos[:, i, 1]
+            cols[f"z_{name}"] = pos[:, i, 2]
         cols["base_ax"] = self.accel[:, 0]
-        cols["base_ay"] = self.accel[:, 1]
+        cols["base_az"] = self.accel[:, 1]
+        cols["active_pairs"] = self.active_pairs
         for k, v in self.energy.items():
             cols[f"energy_{k}"] = v
         return cols

@@ -14,7 +14,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..physics.dynamics import (HC_MIN_APPROACH_SPEED, base_accel, berry_forces, contact_law, jit,
+from ..physics.dynamics import (HC_MIN_APPROACH_SPEED, base_accel, centres, contact_law, coupling_loads, jit,
                                 pair_force, pair_kinematics, pedicel_tension, rhs)
 
 #: the right-hand side inlined into the stage loop only: a compiled call passing a dozen arrays costs
@@ -24,9 +24,10 @@ rhs_stage = nb.njit(cache=True, error_model="numpy", inline="always")(rhs.py_fun
 # float slots of S.fl
 T, H, T_PREV, H_LAST, GRID_T0, GRID_DT, HELD_AX, HELD_AY = range(8)
 # int slots of S.it
-N_STEPS, N_REJECTED, N_RHS, N_SWITCHES, N_IMPACTS, N_ZENO, BREAK_IDX, GRID_K, N_OUT, N_IMP, STATUS, HELD = range(12)
+(N_STEPS, N_REJECTED, N_RHS, N_SWITCHES, N_IMPACTS, N_ZENO, BREAK_IDX, GRID_K, N_OUT, N_IMP, STATUS, HELD,
+ N_NEAR, N_REBUILDS, NEAR_SUM) = range(15)
 # slots of cfg
-RTOL, ATOL, FIXED, ZENO_WIN, LOCATE, HMAX = range(6)
+RTOL, ATOL, FIXED, ZENO_WIN, LOCATE, HMAX, SKIN = range(7)
 # statuses
 DONE, OUT_FULL, IMP_FULL, MAX_STEPS, STEP_UNDERFLOW, NOT_FINITE = range(6)
 # columns of an impact row
@@ -37,6 +38,9 @@ O_ONSET, O_SPEED, O_PEAK, O_TPEAK, O_J, O_D = range(6)
 # contact event functions
 EV_DELTA, EV_PHI = 0, 1
 N_SAMPLES = 4          # sub-intervals per step searched for a sign change (plus local-maximum refinement)
+#: Boole's rule on the N_SAMPLES + 1 equally spaced samples: the per-pair impulse and dissipation
+#: integrals, exact for quintics like the step's dense output
+BOOLE = np.array([7.0, 32.0, 12.0, 32.0, 7.0]) / 90.0
 ROOT_TOL = 1e-13       # s, absolute tolerance of event times
 
 
@@ -44,6 +48,16 @@ ROOT_TOL = 1e-13       # s, absolute tolerance of event times
 def dense(theta, y0, q, h, out):
     """y(t0 + θh) = y0 + h Σ_j Q[:, j] θ^(j+1)."""
     for r in range(y0.shape[0]):
+        acc = 0.0
+        for j in range(q.shape[1] - 1, -1, -1):
+            acc = (acc + q[r, j]) * theta
+        out[r] = y0[r] + h * acc
+
+
+@jit
+def dense_head(theta, y0, q, h, out, m):
+    """dense() for the first m components only (the angles and rates that events and forces need)."""
+    for r in range(m):
         acc = 0.0
         for j in range(q.shape[1] - 1, -1, -1):
             acc = (acc + q[r, j]) * theta
@@ -61,7 +75,7 @@ def rms_norm(x, scale):
 @jit
 def event_value(fn, sign, p, y, M, v_onset):
     i, j = M.pair_idx[p, 0], M.pair_idx[p, 1]
-    delta, delta_dot, _, _ = pair_kinematics(y, M.berry, i, j, M.berry.shape[0])
+    delta, delta_dot, _, _, _ = pair_kinematics(y, M, i, j, M.dof[M.berry.shape[0]])
     if fn == EV_DELTA:
         return sign * delta
     _, _, phi = contact_law(M.pair_law[p], M.pair_par[p], delta, delta_dot, v_onset[p])
@@ -83,7 +97,7 @@ def active_events(mode, law, par):
 def classify(p, y, M, v_onset, old_mode):
     """The mode the state is in: 0 apart, 1 loaded, 2 overlapping but unloaded."""
     i, j = M.pair_idx[p, 0], M.pair_idx[p, 1]
-    delta, delta_dot, _, _ = pair_kinematics(y, M.berry, i, j, M.berry.shape[0])
+    delta, delta_dot, _, _, _ = pair_kinematics(y, M, i, j, M.dof[M.berry.shape[0]])
     if delta <= 0.0:
         return 0, delta_dot
     vo = v_onset[p] if old_mode != 0 else max(delta_dot, HC_MIN_APPROACH_SPEED)
@@ -97,9 +111,10 @@ def classify(p, y, M, v_onset, old_mode):
 @jit
 def locate_root(fn, sign, p, ta, tb, y0, q, h, M, v_onset, work, tol):
     """Illinois iteration on θ ∈ [ta, tb] with v(ta) ≤ 0 < v(tb); returns the right end."""
-    dense(ta, y0, q, h, work)
+    m = 2 * M.dof[M.berry.shape[0]]
+    dense_head(ta, y0, q, h, work, m)
     va = event_value(fn, sign, p, work, M, v_onset)
-    dense(tb, y0, q, h, work)
+    dense_head(tb, y0, q, h, work, m)
     vb = event_value(fn, sign, p, work, M, v_onset)
     side = 0
     for _ in range(200):
@@ -114,7 +129,7 @@ def locate_root(fn, sign, p, ta, tb, y0, q, h, M, v_onset, work, tol):
         # keep the bracket shrinking from both sides
         if (tb - ta) * h < 64 * tol:
             tm = 0.5 * (ta + tb)
-        dense(tm, y0, q, h, work)
+        dense_head(tm, y0, q, h, work, m)
         vm = event_value(fn, sign, p, work, M, v_onset)
         if vm > 0.0:
             tb, vb = tm, vm
@@ -130,23 +145,19 @@ def locate_root(fn, sign, p, ta, tb, y0, q, h, M, v_onset, work, tol):
 
 
 @jit
-def switch_pair(p, new_mode, t, y, delta_dot, S, B, cfg, n):
+def switch_pair(p, new_mode, t, delta_dot, S, B, cfg):
     """Change a pair's mode and keep the impact book and the Zeno guard."""
     old = S.mode[p]
     if old == new_mode:
         return
-    npair = S.mode.shape[0]
-    nc = y.shape[0] - 3 * n - 2 * npair - 5
-    o_d = 3 * n + nc + p
-    o_j = 3 * n + nc + npair + p
     if old == 0:
         S.v_onset[p] = max(delta_dot, HC_MIN_APPROACH_SPEED)
         S.imp_open[p, O_ONSET] = t
         S.imp_open[p, O_SPEED] = delta_dot
         S.imp_open[p, O_PEAK] = 0.0
         S.imp_open[p, O_TPEAK] = t
-        S.imp_open[p, O_J] = y[o_j]
-        S.imp_open[p, O_D] = y[o_d]
+        S.imp_open[p, O_J] = S.pair_int[p, 0]
+        S.imp_open[p, O_D] = S.pair_int[p, 1]
         S.it[N_IMPACTS] += 1
     elif new_mode == 0:
         k = S.it[N_IMP]
@@ -157,8 +168,8 @@ def switch_pair(p, new_mode, t, y, delta_dot, S, B, cfg, n):
         row[I_SPEED] = S.imp_open[p, O_SPEED]
         row[I_PEAK] = S.imp_open[p, O_PEAK]
         row[I_TPEAK] = S.imp_open[p, O_TPEAK]
-        row[I_IMPULSE] = y[o_j] - S.imp_open[p, O_J]
-        row[I_DISS] = y[o_d] - S.imp_open[p, O_D]
+        row[I_IMPULSE] = S.pair_int[p, 0] - S.imp_open[p, O_J]
+        row[I_DISS] = S.pair_int[p, 1] - S.imp_open[p, O_D]
         row[I_SEP_SPEED] = -delta_dot
         S.it[N_IMP] = k + 1
     S.mode[p] = new_mode
@@ -194,39 +205,64 @@ def initial_step(t0, y0, f0, M, X, S, cfg, order, t_stop):
 
 
 @jit
-def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pbuf, fext, tens, cls):
-    """Peaks of contact force and pedicel tension on the step's samples (refined around an
-    interior maximum of the force), and each pair's mode class at every sample."""
-    npair = S.mode.shape[0]
+def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pwbuf, fext, tens, cls):
+    """On the committed part of the step: peaks of contact force and pedicel tension (the force
+    refined around an interior maximum), each near pair's mode class at every sample, and the
+    per-pair impulse and dissipation integrals (Boole's rule on the samples)."""
     n = M.berry.shape[0]
+    nd = M.dof[n]
+    nnear = S.it[N_NEAR]
     for k in range(N_SAMPLES + 1):
         th = theta_end * k / N_SAMPLES
-        dense(th, y0, q, h, work)
-        t = t0 + th * h
-        berry_forces(work, S.mode, S.v_onset, S.smooth, M, fbuf[k], pbuf, fext)
-        ax, ay = base_accel(X.kind, X.par, X.table, t, t0)
-        pedicel_tension(work, ax, ay, fext, M, tens)
+        dense_head(th, y0, q, h, work, 2 * nd)
+        coupling_loads(work, M, fext)
+        for kk in range(nnear):
+            p = S.near[kk]
+            if S.mode[p] == 0 and not S.smooth[p]:
+                fbuf[k, kk] = 0.0
+                pwbuf[k, kk] = 0.0
+                continue
+            f, power, _, _, nx, ny, nz = pair_force(p, work, S.mode, S.v_onset, S.smooth, M)
+            fbuf[k, kk] = f
+            pwbuf[k, kk] = power
+            i, j = M.pair_idx[p, 0], M.pair_idx[p, 1]
+            fext[i, 0] -= f * nx
+            fext[i, 1] -= f * ny
+            fext[i, 2] -= f * nz
+            fext[j, 0] += f * nx
+            fext[j, 1] += f * ny
+            fext[j, 2] += f * nz
+            if S.smooth[p]:
+                cls[k, kk] = classify(p, work, M, S.v_onset, S.mode[p])[0]
+        ax, az = base_accel(X.kind, X.par, X.table, t0 + th * h, t0)
+        pedicel_tension(work, ax, az, fext, M, tens)
         for i in range(n):
             if tens[i] > S.peak_tension[i]:
                 S.peak_tension[i] = tens[i]
-        for p in range(npair):
-            if S.smooth[p]:
-                cls[k, p] = classify(p, work, M, S.v_onset, S.mode[p])[0]
-    for p in range(npair):
+    span = theta_end * h
+    for kk in range(nnear):
+        p = S.near[kk]
         if S.mode[p] == 0 and not S.smooth[p]:
             continue
+        fi = 0.0
+        pi = 0.0
+        for k in range(N_SAMPLES + 1):
+            fi += BOOLE[k] * fbuf[k, kk]
+            pi += BOOLE[k] * pwbuf[k, kk]
+        S.pair_int[p, 0] += span * fi
+        S.pair_int[p, 1] += span * pi
         kbest = 0
         for k in range(1, N_SAMPLES + 1):
-            if fbuf[k, p] > fbuf[kbest, p]:
+            if fbuf[k, kk] > fbuf[kbest, kk]:
                 kbest = k
-        fbest = fbuf[kbest, p]
+        fbest = fbuf[kbest, kk]
         tbest = theta_end * kbest / N_SAMPLES
         turning = 0 < kbest < N_SAMPLES
         if not turning and fbest > 0.0 and fbest >= S.imp_open[p, O_PEAK]:
             # a maximum at a step end is a peak only if the force already falls there
             eps = 1e-3 / N_SAMPLES
             th_in = theta_end * (1.0 - eps) if kbest == N_SAMPLES else theta_end * eps
-            dense(th_in, y0, q, h, work)
+            dense_head(th_in, y0, q, h, work, 2 * nd)
             turning = pair_force(p, work, S.mode, S.v_onset, S.smooth, M)[0] > fbest
         if turning and fbest > 0.0 and fbest >= S.imp_open[p, O_PEAK]:
             # golden-section search between the neighbouring samples (one-sided at the step's ends,
@@ -237,9 +273,9 @@ def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pbuf, fext, tens, 
             for _ in range(40):
                 c1 = b - gr * (b - a)
                 c2 = a + gr * (b - a)
-                dense(c1, y0, q, h, work)
+                dense_head(c1, y0, q, h, work, 2 * nd)
                 f1 = pair_force(p, work, S.mode, S.v_onset, S.smooth, M)[0]
-                dense(c2, y0, q, h, work)
+                dense_head(c2, y0, q, h, work, 2 * nd)
                 f2 = pair_force(p, work, S.mode, S.v_onset, S.smooth, M)[0]
                 if f1 > f2:
                     b = c2
@@ -248,7 +284,7 @@ def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pbuf, fext, tens, 
                 if (b - a) * h < 1e-12:
                     break
             tm = 0.5 * (a + b)
-            dense(tm, y0, q, h, work)
+            dense_head(tm, y0, q, h, work, 2 * nd)
             fm = pair_force(p, work, S.mode, S.v_onset, S.smooth, M)[0]
             if fm > fbest:
                 fbest, tbest = fm, tm
@@ -262,12 +298,13 @@ def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pbuf, fext, tens, 
 @jit
 def _max_on(fn, sign, p, a, b, y0, q, h, M, v_onset, work):
     """Golden-section search for the largest sign·fn on [a, b] (θ units); returns (θ, value)."""
+    m = 2 * M.dof[M.berry.shape[0]]
     gr = 0.6180339887498949
     c1 = b - gr * (b - a)
     c2 = a + gr * (b - a)
-    dense(c1, y0, q, h, work)
+    dense_head(c1, y0, q, h, work, m)
     f1 = event_value(fn, sign, p, work, M, v_onset)
-    dense(c2, y0, q, h, work)
+    dense_head(c2, y0, q, h, work, m)
     f2 = event_value(fn, sign, p, work, M, v_onset)
     for _ in range(60):
         if f1 > 0.0 or f2 > 0.0 or (b - a) * h < ROOT_TOL:
@@ -275,40 +312,43 @@ def _max_on(fn, sign, p, a, b, y0, q, h, M, v_onset, work):
         if f1 > f2:
             b, c2, f2 = c2, c1, f1
             c1 = b - gr * (b - a)
-            dense(c1, y0, q, h, work)
+            dense_head(c1, y0, q, h, work, m)
             f1 = event_value(fn, sign, p, work, M, v_onset)
         else:
             a, c1, f1 = c1, c2, f2
             c2 = a + gr * (b - a)
-            dense(c2, y0, q, h, work)
+            dense_head(c2, y0, q, h, work, m)
             f2 = event_value(fn, sign, p, work, M, v_onset)
     return (c1, f1) if f1 > f2 else (c2, f2)
 
 
 @jit
 def find_event(y0, q, h, t0, M, S, vbuf, ytmp, work):
-    """Earliest θ in (0, 1] where a watched contact function turns positive, or (1, False).
+    """Earliest θ in (0, 1] where a watched contact function of a near pair turns positive, or (1, False).
 
     Each function is sampled at N_SAMPLES + 1 points. A sign change gives a bracket at once;
     a sampled local maximum that is still ≤ 0 but close to zero is refined by a golden-section
     search, so a graze that opens and closes between two samples is not missed."""
-    npair = S.mode.shape[0]
+    nnear = S.it[N_NEAR]
+    m = 2 * M.dof[M.berry.shape[0]]
     tol = max(ROOT_TOL, 8 * 2.2e-16 * abs(t0))
     for k in range(N_SAMPLES + 1):
-        dense(k / N_SAMPLES, y0, q, h, work)
-        for p in range(npair):
+        dense_head(k / N_SAMPLES, y0, q, h, work, m)
+        for kk in range(nnear):
+            p = S.near[kk]
             na, f1, s1, f2, s2 = active_events(S.mode[p], M.pair_law[p], M.pair_par[p])
-            vbuf[k, 2 * p] = event_value(f1, s1, p, work, M, S.v_onset)
-            vbuf[k, 2 * p + 1] = event_value(f2, s2, p, work, M, S.v_onset) if na == 2 else -1.0
+            vbuf[k, 2 * kk] = event_value(f1, s1, p, work, M, S.v_onset)
+            vbuf[k, 2 * kk + 1] = event_value(f2, s2, p, work, M, S.v_onset) if na == 2 else -1.0
     best = 2.0
-    for p in range(npair):
+    for kk in range(nnear):
+        p = S.near[kk]
         if S.smooth[p]:
             continue
         na, f1, s1, f2, s2 = active_events(S.mode[p], M.pair_law[p], M.pair_par[p])
         for a in range(na):
             fn = f1 if a == 0 else f2
             sg = s1 if a == 0 else s2
-            col = 2 * p + a
+            col = 2 * kk + a
             if vbuf[0, col] > 0.0:
                 best = 0.0  # inconsistent start: switch at once, no advance
                 continue
@@ -341,6 +381,58 @@ def find_event(y0, q, h, t0, M, S, vbuf, ytmp, work):
 
 
 @jit
+def rebuild_near(S, M, pos, skin):
+    """The broad phase (a Verlet list): keep the candidate pairs closer than `skin` at the berry
+    centres pos, and every pair in contact. It stays valid while no berry moves skin/2 from pos."""
+    nn = 0
+    for p in range(S.mode.shape[0]):
+        i, j = M.pair_idx[p, 0], M.pair_idx[p, 1]
+        d = math.sqrt((pos[j, 0] - pos[i, 0]) ** 2 + (pos[j, 1] - pos[i, 1]) ** 2 + (pos[j, 2] - pos[i, 2]) ** 2)
+        if d - M.berry[i, 1] - M.berry[j, 1] < skin or S.mode[p] != 0 or S.smooth[p]:
+            S.near[nn] = p
+            nn += 1
+    S.it[N_NEAR] = nn
+    S.ref[:, :] = pos
+    S.it[N_REBUILDS] += 1
+
+
+@jit
+def travel(y0, q, h, M, ref, work, pos):
+    """How far any berry gets from ref over the step (its samples, plus half the largest chord
+    between samples for the stretch in between); fills pos with the centres at the samples."""
+    n = M.berry.shape[0]
+    m = 2 * M.dof[n]
+    for k in range(N_SAMPLES + 1):
+        dense_head(k / N_SAMPLES, y0, q, h, work, m)
+        centres(work, M, pos[k])
+    worst = 0.0
+    for i in range(n):
+        for k in range(N_SAMPLES + 1):
+            d = math.sqrt((pos[k, i, 0] - ref[i, 0]) ** 2 + (pos[k, i, 1] - ref[i, 1]) ** 2
+                          + (pos[k, i, 2] - ref[i, 2]) ** 2)
+            if k > 0:
+                d += 0.5 * math.sqrt((pos[k, i, 0] - pos[k - 1, i, 0]) ** 2 + (pos[k, i, 1] - pos[k - 1, i, 1]) ** 2
+                                     + (pos[k, i, 2] - pos[k - 1, i, 2]) ** 2)
+            worst = max(worst, d)
+    return worst
+
+
+@jit
+def keep_near_valid(y0, q, h, M, S, skin, work, pos):
+    """Rebuild the near list when a berry could have left its skin during this step. A step that
+    itself travels more than skin/2 gets a list with a skin wide enough for it."""
+    if S.mode.shape[0] == 0 or not math.isfinite(skin):
+        return
+    if travel(y0, q, h, M, S.ref, work, pos) <= 0.5 * skin:
+        return
+    rebuild_near(S, M, pos[0], skin)
+    reach = travel(y0, q, h, M, S.ref, work, pos)
+    if reach > 0.5 * skin:
+        rebuild_near(S, M, pos[0], 2.0 * reach * 1.001)
+        S.ref[0, 0] = math.inf  # force a fresh list on the next step
+
+
+@jit
 def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
     """Advance S to t_target (or until a buffer fills or max_steps). Returns a status code."""
     n = M.berry.shape[0]
@@ -359,8 +451,9 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
     work = np.empty(ny)
     q = S.q
     fbuf = np.zeros((N_SAMPLES + 1, max(npair, 1)))
-    pbuf = np.zeros(max(npair, 1))
-    fext = np.zeros((n, 2))
+    pwbuf = np.zeros((N_SAMPLES + 1, max(npair, 1)))
+    fext = np.zeros((n, 3))
+    pos = np.zeros((N_SAMPLES + 1, n, 3))
     tens = np.zeros(n)
     cls = np.zeros((N_SAMPLES + 1, max(npair, 1)), dtype=np.int64)
     vbuf = np.zeros((N_SAMPLES + 1, 2 * max(npair, 1)))
@@ -441,7 +534,9 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
                 for m in range(ns + 1):
                     acc += stages[m, r] * TB.p[m, j]
                 q[r, j] = acc
-        # --- earliest contact switch inside the step
+        # --- broad phase, then the earliest contact switch inside the step
+        keep_near_valid(S.y, q, h, M, S, cfg[SKIN], work, pos)
+        S.it[NEAR_SUM] += S.it[N_NEAR]
         theta_e = 1.0
         event = False
         if locate:
@@ -471,7 +566,7 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
                 kg += 1
             S.it[GRID_K] = kg
         # --- peaks and classes on the committed part of the step
-        sample_step(t0, h, theta_e, S.y, q, M, X, S, work, fbuf, pbuf, fext, tens, cls)
+        sample_step(t0, h, theta_e, S.y, q, M, X, S, work, fbuf, pwbuf, fext, tens, cls)
         # --- commit
         S.y_prev[:] = S.y
         if event:
@@ -484,24 +579,25 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
         S.it[N_STEPS] += 1
         steps += 1
         changed = False
-        for p in range(npair):
+        for kk in range(S.it[N_NEAR]):
+            p = S.near[kk]
             if S.smooth[p]:
                 if t_commit >= S.smooth_until[p]:
-                    c0 = cls[0, p]
+                    c0 = cls[0, kk]
                     same = True
                     for k in range(1, N_SAMPLES + 1):
-                        if cls[k, p] != c0:
+                        if cls[k, kk] != c0:
                             same = False
                     if same:
                         S.smooth[p] = False
                         new, dd = classify(p, S.y, M, S.v_onset, S.mode[p])
-                        switch_pair(p, new, t_commit, S.y, dd, S, B, cfg, n)
+                        switch_pair(p, new, t_commit, dd, S, B, cfg)
                         changed = True
                 continue
             if event or not locate:
                 new, dd = classify(p, S.y, M, S.v_onset, S.mode[p])
                 if new != S.mode[p]:
-                    switch_pair(p, new, t_commit, S.y, dd, S, B, cfg, n)
+                    switch_pair(p, new, t_commit, dd, S, B, cfg)
                     changed = True
         if changed or event or (bi < nbreak and t_commit >= X.breaks[bi]):
             rhs(t_commit, t_commit, S.y, S.f, S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)

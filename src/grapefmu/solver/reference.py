@@ -52,12 +52,15 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     m = scene.model
     M = m.arrays
     X = scene.excitation.arrays
-    lay = layout(m.n_berries, len(m.couplings), len(m.pairs))
-    npair = lay.p
+    lay = layout(m.n_berries, m.n_dof, len(m.couplings))
+    npair = len(m.pairs)
+    ny = lay.size
     st = _State(npair)
     rows, open_imp = [], {}
-    y = np.zeros(lay.size)
-    y[: 2 * lay.n] = scene.initial_state
+    # the reference integrates each pair's impulse and dissipation as extra ODE components
+    # (the event solver uses quadrature instead), so the two check each other
+    y = np.zeros(ny + 2 * npair)
+    y[: 2 * lay.d] = scene.initial_state
     for p in range(npair):
         st.mode[p], ddot = core.classify(p, y, M, st.v_onset, 0)
         if st.mode[p] != 0:
@@ -66,7 +69,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     grid = np.linspace(0.0, t_end, int(round(t_end / dt_out)) + 1)
     out_t, out_y, out_mode, out_acc, out_vo = [], [], [], [], []
     peak_force = np.zeros(npair)
-    dy = np.zeros(lay.size)
+    dy = np.zeros(ny + 2 * npair)
     nfev = 0
     t = 0.0
     seg_start_piece = 0.0
@@ -75,6 +78,8 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
 
     def f(tt, yy):
         rhs(tt, seg_start_piece, yy, dy, st.mode, st.v_onset, st.smooth, M, X.kind, X.par, X.table)
+        for p in range(npair):
+            dy[ny + p], dy[ny + npair + p] = pair_force(p, yy, st.mode, st.v_onset, st.smooth, M)[:2]
         return dy.copy()
 
     def make_event(p, fn, sign, t_seg):
@@ -142,7 +147,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
             old = int(st.mode[p])
             new = TRANSITION[(old, fn)]
             _, ddot, _, _ = _kin(y, M, p)
-            o_j, o_d = lay.impulse.start + p, lay.d_contact.start + p
+            o_j, o_d = ny + p, ny + npair + p
             if old == 0:
                 st.v_onset[p] = max(ddot, HC_MIN_APPROACH_SPEED)
                 open_imp[p] = [t, ddot, 0.0, t, y[o_j], y[o_d]]
@@ -152,11 +157,10 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
             st.mode[p] = new
     wall = time.perf_counter() - wall
     for p, o in open_imp.items():
-        rows.append([p, o[0], t, o[1], o[2], o[3], y[lay.impulse.start + p] - o[4], y[lay.d_contact.start + p] - o[5],
-                     math.nan])
+        rows.append([p, o[0], t, o[1], o[2], o[3], y[ny + p] - o[4], y[ny + npair + p] - o[5], math.nan])
     ongoing = np.r_[np.zeros(len(rows) - len(open_imp), bool), np.ones(len(open_imp), bool)]
     tt = np.concatenate(out_t)
-    run = Run(scene, tt, np.concatenate(out_y), np.concatenate(out_mode).reshape(len(tt), -1)[:, :npair],
+    run = Run(scene, tt, np.concatenate(out_y)[:, :ny], np.concatenate(out_mode).reshape(len(tt), -1)[:, :npair],
               np.concatenate(out_acc), np.concatenate(out_vo).reshape(len(tt), -1)[:, :npair],
               np.zeros((len(tt), npair), dtype=bool), Impacts.from_rows(np.array(rows).reshape(-1, 9), ongoing),
               peak_force, np.zeros(m.n_berries),
@@ -167,4 +171,4 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
 
 def _kin(y, M, p):
     from ..physics.dynamics import pair_kinematics
-    return pair_kinematics(y, M.berry, M.pair_idx[p, 0], M.pair_idx[p, 1], M.berry.shape[0])
+    return pair_kinematics(y, M, M.pair_idx[p, 0], M.pair_idx[p, 1], M.dof[M.berry.shape[0]])[:4]

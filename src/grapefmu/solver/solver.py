@@ -16,13 +16,16 @@ import numpy as np
 from ..errors import SolverError
 from ..model.excitation import ExcitationArrays, constant
 from ..model.model import Scene
-from ..physics.dynamics import jit, rhs
+from ..physics.dynamics import centres, jit, rhs
 from ..physics.layout import layout
 from . import core
 from .tableau import BOGACKI_SHAMPINE, DOPRI5
 
 #: MATLAB ode23's default tolerances, used by the paper method unless told otherwise.
 PAPER_RTOL, PAPER_ATOL = 1e-3, 1e-6
+#: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
+#: wider means fewer rebuilds but more near pairs to watch on every step
+SKIN_FRACTION = 0.5
 
 
 class SolverState(NamedTuple):
@@ -42,6 +45,9 @@ class SolverState(NamedTuple):
     ring_pos: np.ndarray
     peak_force: np.ndarray
     peak_tension: np.ndarray
+    pair_int: np.ndarray   # (P, 2): impulse ∫F dt and dissipation per pair since the start
+    near: np.ndarray       # (P,): the broad phase's near pairs, the first it[N_NEAR] entries
+    ref: np.ndarray        # (N, 3): berry centres when the near list was built
 
     def copy(self) -> SolverState:
         return SolverState(*(a.copy() for a in self))
@@ -64,11 +70,10 @@ def _buffers(cap: int, ny: int, npair: int, cap_imp: int) -> Buffers:
 
 
 @jit
-def _initial_modes(S, M):
-    """Modes from the state; a pair that starts in contact opens an impact at the start time."""
-    n = M.berry.shape[0]
+def _initial_modes(S, M, skin):
+    """Modes from the state (a pair that starts in contact opens an impact at the start time),
+    then the first near list."""
     npair = S.mode.shape[0]
-    nc = M.coup_idx.shape[0]
     for p in range(npair):
         mode, ddot = core.classify(p, S.y, M, S.v_onset, 0)
         S.mode[p] = mode
@@ -77,9 +82,13 @@ def _initial_modes(S, M):
             S.imp_open[p, core.O_SPEED] = ddot
             S.imp_open[p, core.O_PEAK] = 0.0
             S.imp_open[p, core.O_TPEAK] = S.fl[core.T]
-            S.imp_open[p, core.O_J] = S.y[3 * n + nc + npair + p]
-            S.imp_open[p, core.O_D] = S.y[3 * n + nc + p]
+            S.imp_open[p, core.O_J] = 0.0
+            S.imp_open[p, core.O_D] = 0.0
             S.it[core.N_IMPACTS] += 1
+    pos = np.zeros((M.berry.shape[0], 3))
+    centres(S.y, M, pos)
+    core.rebuild_near(S, M, pos, skin)
+    S.it[core.N_REBUILDS] = 0
 
 
 def _held_input(S: SolverState) -> tuple[float, float] | None:
@@ -98,7 +107,8 @@ class Solver:
     """One simulation in progress. The model is read-only; everything that changes lives in `state`."""
 
     def __init__(self, scene: Scene, *, method: str | None = None, rtol: float | None = None,
-                 atol: float | None = None, fixed_step: float | None = None, max_steps: int = 10_000_000):
+                 atol: float | None = None, fixed_step: float | None = None, max_steps: int = 10_000_000,
+                 skin: float | None = None):
         s = scene.solver
         self.scene = scene
         self.method = method or s.method
@@ -112,28 +122,32 @@ class Solver:
         self.model = scene.model
         self.M = scene.model.arrays
         self.excitation = scene.excitation.arrays
-        self.layout = layout(self.model.n_berries, len(self.model.couplings), len(self.model.pairs))
+        self.layout = layout(self.model.n_berries, self.model.n_dof, len(self.model.couplings))
+        self.npair = len(self.model.pairs)
+        if skin is None:
+            skin = SKIN_FRACTION * float(np.mean([b.radius for b in self.model.berries]))
         self.cfg = np.array([self.rtol, self.atol, self.fixed_step, s.zeno_window,
-                             1.0 if self.method == "event" else 0.0, math.inf])
+                             1.0 if self.method == "event" else 0.0, math.inf, skin])
         self._held_arrays = constant(1.0, 0.0).arrays  # reused for every held input: no allocation per step
         self._closed: list[np.ndarray] = []
         self.state = self._fresh_state(scene.initial_state, s.zeno_max_events)
-        self._scratch = _buffers(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
+        self._scratch = _buffers(1, self.layout.size, self.npair, max(self.npair, 1) * 4)
 
     # --- state -----------------------------------------------------------------------------------
     def _fresh_state(self, x0: np.ndarray, zeno_max: int) -> SolverState:
         lay = self.layout
-        ny, npair, n = lay.size, lay.p, lay.n
+        ny, npair, n = lay.size, self.npair, lay.n
         p = max(npair, 1)
         ns = self.tableau.b.shape[0]
         y = np.zeros(ny)
-        y[: 2 * n] = x0
+        y[: 2 * lay.d] = x0
         S = SolverState(y, np.zeros(ny), y.copy(), np.zeros((ns + 1, ny)), np.zeros((ny, self.tableau.p.shape[1])),
-                        np.zeros(8), np.zeros(12, dtype=np.int64), np.zeros(npair, dtype=np.int64),
+                        np.zeros(8), np.zeros(15, dtype=np.int64), np.zeros(npair, dtype=np.int64),
                         np.full(npair, core.HC_MIN_APPROACH_SPEED), np.zeros(npair, dtype=np.bool_),
                         np.zeros(npair), np.zeros((p, 6)), np.full((p, zeno_max), -np.inf),
-                        np.zeros(p, dtype=np.int64), np.zeros(npair), np.full(n, -np.inf))
-        _initial_modes(S, self.M)
+                        np.zeros(p, dtype=np.int64), np.zeros(npair), np.full(n, -np.inf), np.zeros((npair, 2)),
+                        np.zeros(npair, dtype=np.int64), np.zeros((n, 3)))
+        _initial_modes(S, self.M, self.cfg[core.SKIN])
         self._refresh_derivative(S)
         return S
 
@@ -190,7 +204,9 @@ class Solver:
         it = self.state.it
         return {"steps": int(it[core.N_STEPS]), "rejected": int(it[core.N_REJECTED]), "rhs_evaluations": int(it[core.N_RHS]),
                 "switches": int(it[core.N_SWITCHES]), "impacts": int(it[core.N_IMPACTS]),
-                "zeno_guard_activations": int(it[core.N_ZENO])}
+                "zeno_guard_activations": int(it[core.N_ZENO]), "degrees_of_freedom": self.layout.d,
+                "candidate_pairs": self.npair, "near_pairs_mean": float(it[core.NEAR_SUM]) / max(int(it[core.N_STEPS]), 1),
+                "near_list_rebuilds": int(it[core.N_REBUILDS])}
 
     # --- stepping --------------------------------------------------------------------------------
     def _integrate(self, t_target: float, buffers: Buffers, max_steps: int) -> int:
@@ -277,7 +293,7 @@ class Solver:
         S = self.state
         lay = self.layout
         n_expected = int(math.floor((t_end - self.t) / dt_out + 1e-9)) + 1
-        buf = _buffers(n_expected + 1, lay.size, lay.p, max(lay.p, 1) * 256)
+        buf = _buffers(n_expected + 1, lay.size, self.npair, max(self.npair, 1) * 256)
         S.fl[core.GRID_T0] = self.t
         S.fl[core.GRID_DT] = dt_out
         S.it[core.GRID_K] = 1
