@@ -66,7 +66,10 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     names = [b.name for b in berries]
     pairs = _contact(doc.get("contact"), berries) if "contact" in doc else ()
     couplings = _coupling(doc["coupling"], berries) if "coupling" in doc else ()
-    pairs, pruned = _reachable(pairs, berries)
+    listed = len(doc["contact"].get("pairs", ())) if isinstance(doc.get("contact"), dict) and "pairs" in doc["contact"] \
+        else len(berries) * (len(berries) - 1) // 2
+    pairs, _ = _reachable(pairs, berries)
+    pruned = listed - len(pairs) if "contact" in doc else 0
     model = Model(tuple(berries), tuple(pairs), tuple(couplings), gravity, pruned)
     solver = _solver(doc.get("solver", {}))
     excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)

@@ -16,7 +16,13 @@ def _pyplot():
     return plt
 
 
+#: above this many berries the figure shows envelopes and counts, not one line per berry and pair
+LINES_LIMIT = 8
+
+
 def plot_run(run: Run, path: str | Path, title: str | None = None) -> None:
+    if run.scene.model.n_berries > LINES_LIMIT:
+        return plot_cluster(run, path, title)
     plt = _pyplot()
     m = run.scene.model
     th = run.scene.thresholds
@@ -47,13 +53,79 @@ def plot_run(run: Run, path: str | Path, title: str | None = None) -> None:
     ax[3].set_ylabel("energy (mJ)")
     ax[3].legend(loc="upper right", fontsize=8, ncol=2)
     ax[4].plot(t, run.accel[:, 0], label="ax")
-    ax[4].plot(t, run.accel[:, 1], label="ay")
+    ax[4].plot(t, run.accel[:, 1], label="az")
     ax[4].set_ylabel("rachis accel (m/s²)")
     ax[4].set_xlabel("time (s)")
     ax[4].legend(loc="upper right", fontsize=8)
+    _finish(plt, fig, run, path, title)
+
+
+def _finish(plt, fig, run: Run, path: str | Path, title: str | None) -> None:
     s = run.summary()
-    fig.suptitle(title or f"{run.scene.name}: {s['collision_count']} impacts, peak contact {s['peak_contact_force']:.3g} N, "
-                 f"peak pedicel {s['peak_pedicel_force']:.3g} N, ledger error {run.ledger_error():.1e}", fontsize=10)
+    fig.suptitle(title or f"{run.scene.name}: {s['berries']} berries, {s['collision_count']} impacts, peak contact "
+                 f"{s['peak_contact_force']:.3g} N, peak pedicel {s['peak_pedicel_force']:.3g} N, "
+                 f"ledger error {run.ledger_error():.1e}", fontsize=10)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format=Path(path).suffix.lstrip(".") or "png")
     plt.close(fig)
+
+
+def plot_cluster(run: Run, path: str | Path, title: str | None = None) -> None:
+    """A cluster: the berries at rest and at their largest swing, force and tension envelopes against
+    the thresholds, pairs in contact, energy per berry and the rachis input."""
+    plt = _pyplot()
+    th = run.scene.thresholds
+    t = run.t
+    fig = plt.figure(figsize=(12, 11), constrained_layout=True)
+    grid = fig.add_gridspec(4, 2)
+    pos = run.positions
+    moved = np.linalg.norm(pos - pos[:1] - (pos.mean(axis=1, keepdims=True) - pos[:1].mean(axis=1, keepdims=True)),
+                           axis=2).max(axis=1)
+    k_max = int(np.argmax(moved))
+    for col, (k, label) in enumerate(((0, "t = 0"), (k_max, f"largest swing, t = {t[k_max]:.3f} s"))):
+        ax = fig.add_subplot(grid[0, col], projection="3d")
+        r = run.scene.model.arrays.berry[:, 1]
+        ax.scatter(pos[k, :, 0], pos[k, :, 1], pos[k, :, 2], s=(r / r.max()) ** 2 * 60,
+                   c=run.pedicel_force[k], cmap="viridis", depthshade=False)
+        ax.set_title(f"berries, {label} (colour: pedicel tension)", fontsize=9)
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_zlabel("z (m)")
+    ax = fig.add_subplot(grid[1, 0])
+    ax.plot(t, run.contact_force.max(axis=1, initial=0.0), lw=0.8, label="largest contact force")
+    ax.axhline(th.bruise_force, color="r", ls="--", lw=0.8, label=f"bruise {th.bruise_force:g} N")
+    ax.set_ylabel("force (N)")
+    ax.legend(loc="upper right", fontsize=8)
+    ax = fig.add_subplot(grid[1, 1])
+    ax.plot(t, run.pedicel_force.max(axis=1), lw=0.8, label="largest pedicel tension")
+    ax.plot(t, np.median(run.pedicel_force, axis=1), lw=0.8, label="median")
+    ax.axhline(th.detachment_force, color="r", ls="--", lw=0.8, label=f"detachment {th.detachment_force:g} N")
+    ax.set_ylabel("tension (N)")
+    ax.legend(loc="upper right", fontsize=8)
+    ax = fig.add_subplot(grid[2, 0])
+    ax.step(t, run.active_pairs, where="post", lw=0.8)
+    ax.set_ylabel("pairs in contact")
+    ax.set_title(f"{run.stats.get('candidate_pairs', len(run.scene.model.pairs))} candidate pairs; "
+                 f"{run.stats.get('near_pairs_mean', float('nan')):.0f} near pairs per step on average", fontsize=9)
+    ax = fig.add_subplot(grid[2, 1])
+    per_berry = run.dissipated_per_berry() * 1e3
+    ax.bar(np.arange(len(per_berry)), np.sort(per_berry)[::-1], width=1.0)
+    ax.set_ylabel("dissipated per berry (mJ)")
+    ax.set_xlabel("berries, most first")
+    ax = fig.add_subplot(grid[3, 0])
+    e = run.energy
+    for k in ("kinetic", "gravity", "hinge_elastic", "contact_elastic"):
+        ax.plot(t, e[k] * 1e3, label=k.replace("_", " "))
+    ax.plot(t, (e["dissipated_hinge"] + e["dissipated_coupling"] + e["dissipated_contact"]) * 1e3, ls="--",
+            label="dissipated")
+    ax.plot(t, e["base_work"] * 1e3, ls=":", label="work by base")
+    ax.set_ylabel("energy (mJ)")
+    ax.set_xlabel("time (s)")
+    ax.legend(loc="upper left", fontsize=8, ncol=2)
+    ax = fig.add_subplot(grid[3, 1])
+    ax.plot(t, run.accel[:, 0], label="ax")
+    ax.plot(t, run.accel[:, 1], label="az")
+    ax.set_ylabel("rachis accel (m/s²)")
+    ax.set_xlabel("time (s)")
+    ax.legend(loc="upper right", fontsize=8)
+    _finish(plt, fig, run, path, title)

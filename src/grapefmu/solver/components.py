@@ -1,0 +1,113 @@
+"""Split a scene into groups of berries that can never interact, and run each group on its own.
+
+Two berries interact only through a candidate contact pair or a coupling. Berries that cannot
+reach each other form independent systems, so each group gets its own step sizes: a stiff contact
+in one group never shortens the steps of another, a berry with no possible contact runs the pure
+pendulum model, and each group's results are exactly those of the group simulated alone.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from ..model.model import ContactPair, Coupling, Model, Scene
+from ..physics.layout import layout
+from ..results.run import Impacts, Run
+from . import core
+
+
+def groups(model: Model) -> list[list[int]]:
+    """Connected components of the interaction graph (berry indices, each group ascending)."""
+    parent = list(range(model.n_berries))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for link in (*model.pairs, *model.couplings):
+        a, b = root(link.i), root(link.j)
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+    out: dict[int, list[int]] = {}
+    for i in range(model.n_berries):
+        out.setdefault(root(i), []).append(i)
+    return list(out.values())
+
+
+def sub_scene(scene: Scene, members: list[int]) -> Scene:
+    """The scene restricted to some berries (their pairs and couplings, renumbered)."""
+    m = scene.model
+    new = {old: k for k, old in enumerate(members)}
+    pairs = tuple(ContactPair(new[p.i], new[p.j], p.law) for p in m.pairs if p.i in new)
+    couplings = tuple(Coupling(new[c.i], new[c.j], c.stiffness, c.damping) for c in m.couplings if c.i in new)
+    dof = m.arrays.dof
+    idx = [k for i in members for k in range(dof[i], dof[i + 1])]
+    model = Model(tuple(m.berries[i] for i in members), pairs, couplings, m.gravity)
+    return replace(scene, model=model, angles=tuple(scene.angles[k] for k in idx),
+                   angular_velocities=tuple(scene.angular_velocities[k] for k in idx))
+
+
+def run_by_group(scene: Scene, simulate_one: Callable[[Scene], Run]) -> Run:
+    """simulate_one on each group, merged into one Run of the whole scene."""
+    parts = groups(scene.model)
+    if len(parts) == 1:
+        return simulate_one(scene)
+    runs = [simulate_one(sub_scene(scene, members)) for members in parts]
+    return merge(scene, parts, runs)
+
+
+def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
+    m = scene.model
+    lay = layout(m.n_berries, m.n_dof, len(m.couplings))
+    t = runs[0].t
+    y = np.zeros((len(t), lay.size))
+    npair = len(m.pairs)
+    mode = np.zeros((len(t), npair), dtype=np.int64)
+    v_onset = np.zeros((len(t), npair))
+    smooth = np.zeros((len(t), npair), dtype=bool)
+    peak_force, peak_tension = np.zeros(npair), np.zeros(m.n_berries)
+    pair_index = {(p.i, p.j): k for k, p in enumerate(m.pairs)}
+    coup_index = {(c.i, c.j): k for k, c in enumerate(m.couplings)}
+    dof = m.arrays.dof
+    rows = []
+    ongoing = []
+    for members, run in zip(parts, runs):
+        if len(run.t) != len(t) or not np.array_equal(run.t, t):
+            raise RuntimeError("groups were sampled on different grids")  # same scene settings: cannot happen
+        sl = run.layout
+        idx = np.array([k for i in members for k in range(dof[i], dof[i + 1])], dtype=int)
+        y[:, lay.q.start + idx] = run.y[:, sl.q]
+        y[:, lay.w.start + idx] = run.y[:, sl.w]
+        y[:, lay.d_hinge.start + np.array(members)] = run.y[:, sl.d_hinge]
+        for k, c in enumerate(run.scene.model.couplings):
+            y[:, lay.d_coupling.start + coup_index[(members[c.i], members[c.j])]] = run.y[:, sl.d_coupling.start + k]
+        y[:, lay.d_contact] += run.y[:, sl.d_contact]
+        y[:, lay.work] += run.y[:, sl.work]
+        y[:, lay.base_velocity] = run.y[:, sl.base_velocity]
+        y[:, lay.base] = run.y[:, sl.base]
+        glob = np.array([pair_index[(members[p.i], members[p.j])] for p in run.scene.model.pairs], dtype=int)
+        if len(glob):
+            mode[:, glob], v_onset[:, glob], smooth[:, glob] = run.mode, run.v_onset, run.smooth
+            peak_force[glob] = run.peak_force
+        peak_tension[members] = run.peak_tension
+        imp = run.impacts
+        for k in range(len(imp)):  # in core.I_* column order
+            rows.append([glob[imp.pair[k]], imp.onset[k], imp.end[k], imp.approach_speed[k], imp.peak_force[k],
+                         imp.peak_time[k], imp.impulse[k], imp.dissipated[k], imp.separation_speed[k]])
+            ongoing.append(imp.ongoing[k])
+    stats = dict(runs[0].stats)
+    for key in ("steps", "rejected", "rhs_evaluations", "switches", "impacts", "zeno_guard_activations",
+                "degrees_of_freedom", "candidate_pairs", "near_list_rebuilds", "wall_time", "segments"):
+        if all(key in r.stats for r in runs):
+            stats[key] = sum(r.stats[key] for r in runs)
+    if all("near_pairs_mean" in r.stats for r in runs):
+        stats["near_pairs_mean"] = sum(r.stats["near_pairs_mean"] * r.stats["steps"] for r in runs) / max(stats["steps"], 1)
+    stats["groups"] = len(parts)
+    table = np.array(rows, dtype=float).reshape(-1, core.IMPACT_COLUMNS)
+    impacts = Impacts.from_rows(table, np.array(ongoing, dtype=bool))
+    return Run(scene, t, y, mode, runs[0].accel, v_onset, smooth, impacts, peak_force, peak_tension, stats)
+

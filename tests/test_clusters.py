@@ -1,0 +1,147 @@
+"""Whole clusters: generated scenes, the broad phase, independent groups and the planar row."""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grapefmu.cluster import ClusterSpec, RowSpec, cluster_scene, row_scene
+from grapefmu.errors import SceneError
+from grapefmu.model import ContactPair, Model
+from grapefmu.model.scene import load_scene, scene_from_dict
+from grapefmu.physics.dynamics import centres
+from grapefmu.solver.api import simulate
+from grapefmu.solver.components import groups, sub_scene
+from grapefmu.solver.solver import Solver
+
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+
+
+def cluster(n, seed=1, t_end=0.6, rtol=1e-8, **kw):
+    doc = cluster_scene(ClusterSpec(berries=n, seed=seed, **kw))
+    doc["solver"] = {"rtol": rtol, "atol": rtol * 1e-3, "t_end": t_end, "output_interval": 1e-3}
+    return scene_from_dict(doc, Path.cwd())
+
+
+def test_generated_cluster_is_at_rest_without_overlap_and_reproducible():
+    doc = cluster_scene(ClusterSpec(berries=40, seed=5))
+    assert doc == cluster_scene(ClusterSpec(berries=40, seed=5))
+    assert doc != cluster_scene(ClusterSpec(berries=40, seed=6))
+    sc = scene_from_dict({**doc, "excitation": {"kind": "none"}, "solver": {"t_end": 0.2, "rtol": 1e-9}}, Path.cwd())
+    pos = np.zeros((40, 3))
+    centres(sc.initial_state, sc.model.arrays, pos)
+    r = sc.model.arrays.berry[:, 1]
+    gaps = [np.linalg.norm(pos[i] - pos[j]) - r[i] - r[j] for i in range(40) for j in range(i)]
+    assert min(gaps) >= -1e-12
+    run = simulate(sc)
+    # the placed pose is the static equilibrium: nothing moves without excitation
+    assert np.abs(run.angles - run.angles[0]).max() < 1e-9
+    assert run.collision_count == 0
+
+
+def test_bad_cluster_request_names_the_field():
+    with pytest.raises(SceneError, match="cluster.precompression"):
+        cluster_scene(ClusterSpec(berries=10, precompression=0.01))
+    with pytest.raises(SceneError, match=r"cluster.berries.*\[1, 1000\]"):
+        cluster_scene(ClusterSpec(berries=0))
+
+
+def test_energy_ledger_closes_for_a_cluster_under_pick_and_place():
+    run = simulate(cluster(30, t_end=1.0))
+    assert run.collision_count > 10
+    assert run.ledger_error() < 1e-6
+    # every impact's dissipation sums to the ledger's contact term (quadrature against ODE integral)
+    assert run.impacts.dissipated.sum() == pytest.approx(run.energy["dissipated_contact"][-1], rel=1e-6)
+
+
+def test_pruning_never_drops_a_pair_that_touches():
+    """Random clusters with precompression, against all N(N−1)/2 pairs watched on every step."""
+    for seed in (1, 2, 3):
+        sc = cluster(25, seed=seed, t_end=0.8, rtol=1e-7, precompression=1e-3)
+        pruned = Solver(sc).run()
+        berries = sc.model.berries
+        laws = {(p.i, p.j): p.law for p in sc.model.pairs}  # damping from e depends on each pair's masses
+        every = tuple(ContactPair(i, j, laws.get((i, j), sc.model.pairs[0].law))
+                      for i in range(len(berries)) for j in range(i + 1, len(berries)))
+        assert len(every) > len(sc.model.pairs)
+        full = replace(sc, model=replace(sc.model, pairs=every))
+        solver = Solver(full, skin=math.inf)
+        ref = solver.run()
+        assert ref.stats["near_pairs_mean"] == len(every)
+        assert pruned.stats["near_pairs_mean"] < len(sc.model.pairs)
+        touched = {(every[p].i, every[p].j) for p in set(ref.impacts.pair.tolist())}
+        kept = {(p.i, p.j) for p in sc.model.pairs}
+        assert touched and touched <= kept
+        np.testing.assert_array_equal(pruned.angles, ref.angles)
+        assert pruned.collision_count == ref.collision_count
+
+
+def test_berries_that_cannot_touch_give_exactly_the_single_pendulum():
+    base = cluster(12, seed=4, t_end=0.8)
+    far = [replace(b, hinge_x=0.2 * i) for i, b in enumerate(base.model.berries)]
+    sc = replace(base, model=Model(tuple(far), (), (), base.model.gravity))
+    assert groups(sc.model) == [[i] for i in range(12)]
+    run = simulate(sc)
+    assert run.stats["groups"] == 12 and run.stats["candidate_pairs"] == 0
+    for i in range(12):
+        alone = simulate(sub_scene(sc, [i]))
+        np.testing.assert_array_equal(run.angles[:, 2 * i: 2 * i + 2], alone.angles)
+        np.testing.assert_array_equal(run.pedicel_force[:, i], alone.pedicel_force[:, 0])
+    assert run.ledger_error() < 1e-7
+
+
+def test_planar_row_of_two_is_the_dual_system():
+    dual = load_scene(SCENES / "paper" / "test3.toml")
+    b = dual.model.berries[0]
+    doc = row_scene(RowSpec(berries=2, mass=b.mass, radius=b.radius, twig_length=b.twig_length, pitch=0.03,
+                            hinge_stiffness=b.hinge_stiffness, hinge_damping=b.hinge_damping, angles=dual.angles,
+                            contact={"law": "kelvin-voigt", "stiffness": 2000.0,
+                                     "damping": dual.model.pairs[0].law.damping},
+                            solver={"rtol": 1e-9, "atol": 1e-11, "t_end": 3.0}))
+    row = scene_from_dict(doc, Path.cwd())
+    a, d = simulate(row), simulate(dual)
+    np.testing.assert_array_equal(a.y, d.y)
+    np.testing.assert_array_equal(a.impacts.peak_force, d.impacts.peak_force)
+
+
+def test_spherical_cluster_held_in_the_plane_is_the_planar_model():
+    """Spherical berries with zero tilt and hinges on the rod stay in the x–z plane and follow the
+    planar equations; a check of the spherical terms against the planar derivation."""
+    dual = load_scene(SCENES / "paper" / "test3.toml")
+    m = dual.model
+    sph = tuple(replace(b, spherical=True) for b in m.berries)
+    q = [x for a in dual.angles for x in (a, 0.0)]
+    sc = replace(dual, model=replace(m, berries=sph), angles=tuple(q), angular_velocities=(0.0,) * 4)
+    a, d = simulate(sc), simulate(dual)
+    assert np.abs(a.angles[:, 1::2]).max() == 0.0
+    assert np.abs(a.angles[:, 0::2] - d.angles).max() < 1e-7
+    assert a.collision_count == d.collision_count
+
+
+def test_newtons_cradle_conserves_momentum_and_energy_in_the_elastic_limit():
+    """Five berries touching at rest, the first released: with a stiff elastic contact and no hinge
+    losses the swing passes down the chain; energy is conserved to the tolerance and the horizontal
+    momentum just before and after the collision train matches."""
+    doc = row_scene(RowSpec(berries=5, hinge_stiffness=0.0, hinge_damping=0.0, pitch=0.027,
+                            angles=(-0.3, 0, 0, 0, 0), contact={"law": "hertz", "stiffness": 5e6},
+                            solver={"rtol": 1e-10, "atol": 1e-12, "t_end": 0.6, "output_interval": 1e-4}))
+    sc = scene_from_dict(doc, Path.cwd())
+    run = simulate(sc)
+    e = run.energy
+    total = e["kinetic"] + e["gravity"] + e["contact_elastic"]
+    assert np.abs(total - total[0]).max() < 1e-7 * total[0]
+    b = sc.model.arrays.berry
+    px = (b[:, 0] * b[:, 2] * np.cos(run.angles) * run.angular_velocities).sum(axis=1)
+    first = run.impacts.onset.min()
+    train = run.impacts.onset < first + 0.02  # the first collision train, before anything swings back
+    last = run.impacts.end[train].max()
+    assert train.sum() >= 4 and last < first + 0.02
+    k0 = np.searchsorted(run.t, first) - 1
+    k1 = np.searchsorted(run.t, last) + 1
+    assert px[k0] > 1e-3
+    assert px[k1] == pytest.approx(px[k0], rel=2e-3)
+    # the last berry leaves with (nearly) all of it
+    assert run.angular_velocities[k1, -1] > 0.9 * run.angular_velocities[k0, 0]
