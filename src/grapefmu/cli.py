@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from importlib import resources
@@ -104,6 +105,21 @@ def cmd_cluster(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_sweep(a: argparse.Namespace) -> int:
+    from .sweep import load_spec, run_sweep
+
+    spec = load_spec(a.spec)
+    out = Path(a.output) if a.output else Path(a.spec).with_suffix(".parquet")
+    if a.workers is not None and not 1 <= a.workers <= 1024:
+        raise GrapefmuError(f"--workers: expected an integer in [1, 1024], got {a.workers}")
+    n = len(spec.runs())
+    where = f"Dask scheduler {a.scheduler}" if a.scheduler else f"{a.workers or os.cpu_count()} local processes"
+    print(f"sweep: {n} runs ({spec.mode}) of {spec.base.get('name', 'scene')} on {where}", file=sys.stderr)
+    run_sweep(spec, out, workers=a.workers, scheduler=a.scheduler)
+    print(f"wrote {out}")
+    return 0
+
+
 def cmd_paper(a: argparse.Namespace) -> int:
     from .paper.reproduce import reproduce
     return reproduce(Path(a.out))
@@ -185,6 +201,12 @@ def build_parser() -> argparse.ArgumentParser:
         c.add_argument(f"--{name.replace('_', '-')}", type=float, nargs=2, metavar=("MEAN", "SD"),
                        help=f"normal distribution of the {name.replace('_', ' ')}, {unit}")
     c.set_defaults(func=cmd_cluster)
+    w = sub.add_parser("sweep", help="run a grid or Monte Carlo sweep over scene parameters to Parquet (resumable)")
+    w.add_argument("spec", help="sweep spec TOML (docs/sweeps.md)")
+    w.add_argument("-o", "--output", help="the Parquet file (default: the spec's name with .parquet)")
+    w.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    w.add_argument("--scheduler", help="a Dask distributed scheduler address, tcp://host:port, instead")
+    w.set_defaults(func=cmd_sweep)
     p = sub.add_parser("paper", help="reproduce tests 1–9 of Xu et al. (2025) and check each claim")
     p.add_argument("--out", default="out/paper", help="directory for figures and the claims report")
     p.set_defaults(func=cmd_paper)

@@ -1,0 +1,187 @@
+"""The sweep specification (TOML) and the runs it expands to.
+
+    scene = "cluster.toml"         # the base scene, relative to this file
+    mode = "grid"                  # or "monte-carlo"
+    samples = 200                  # monte-carlo: number of runs
+    seed = 1                       # monte-carlo: the draws are fixed by the seed
+
+    [[parameters]]
+    key = "contact.stiffness"      # a key of the base scene: tables by name, lists by [i] or [*]
+    values = [1000.0, 2000.0]      # grid: every combination of every parameter's values
+    # monte-carlo: distribution = "uniform" (low, high), "normal" (mean, sd) or "choice" (values)
+
+Every run's inputs are fixed here, in the driver, before anything is executed: the rows cannot
+depend on the executor, the number of workers or the order runs finish in.
+"""
+from __future__ import annotations
+
+import copy
+import hashlib
+import itertools
+import json
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import SceneError
+from ..model import validate as v
+
+KEY_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+|\*)\])?")
+SPEC_KEYS = {"scene", "mode", "samples", "seed", "parameters"}
+PARAM_KEYS = {"key", "values", "distribution", "low", "high", "mean", "sd"}
+MAX_RUNS = 1_000_000
+
+
+@dataclass(frozen=True)
+class Parameter:
+    key: str
+    values: tuple[Any, ...] = ()
+    distribution: str = "grid"
+    a: float = 0.0
+    b: float = 0.0
+
+    def draw(self, rng: np.random.Generator) -> Any:
+        if self.distribution == "uniform":
+            return float(rng.uniform(self.a, self.b))
+        if self.distribution == "normal":
+            return float(rng.normal(self.a, self.b))
+        return self.values[int(rng.integers(len(self.values)))]
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    base: dict[str, Any]          # the base scene document
+    base_dir: Path
+    mode: str
+    parameters: tuple[Parameter, ...]
+    samples: int
+    seed: int
+    text: str                     # the spec and scene as read, for the fingerprint
+
+    @property
+    def fingerprint(self) -> str:
+        """Identifies the runs: a journal or output written for another spec is never mixed in."""
+        return hashlib.sha256(self.text.encode()).hexdigest()[:16]
+
+    def runs(self) -> list[dict[str, Any]]:
+        """The inputs of every run, in run order: {key: value}."""
+        keys = [p.key for p in self.parameters]
+        if self.mode == "grid":
+            return [dict(zip(keys, combo)) for combo in itertools.product(*(p.values for p in self.parameters))]
+        rng = np.random.default_rng(self.seed)
+        return [{p.key: p.draw(rng) for p in self.parameters} for _ in range(self.samples)]
+
+
+def load_spec(path: str | Path) -> SweepSpec:
+    path = Path(path)
+    try:
+        text = path.read_text()
+        doc = tomllib.loads(text)
+    except OSError as e:
+        raise SceneError(str(path), f"cannot read sweep spec: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(str(path), f"not valid TOML: {e}") from None
+    v.no_unknown_keys("", doc, SPEC_KEYS)
+    if not isinstance(doc.get("scene"), str):
+        raise SceneError("scene", "expected the path of the base scene TOML")
+    scene_path = path.parent / doc["scene"]
+    try:
+        scene_text = scene_path.read_text()
+    except OSError as e:
+        raise SceneError("scene", f"cannot read {scene_path}: {e.strerror}") from None
+    base = tomllib.loads(scene_text)
+    mode = v.choice("mode", doc.get("mode", "grid"), ("grid", "monte-carlo"))
+    raw = doc.get("parameters")
+    if not isinstance(raw, list) or not raw:
+        raise SceneError("parameters", "expected at least one [[parameters]] table")
+    params = tuple(_parameter(f"parameters[{n}]", p, mode, base) for n, p in enumerate(raw))
+    if len({p.key for p in params}) != len(params):
+        raise SceneError("parameters", "a key is swept twice")
+    samples = v.integer("samples", doc.get("samples", 100), 1, MAX_RUNS) if mode == "monte-carlo" else 0
+    seed = v.integer("seed", doc.get("seed", 1), 0, 2**63 - 1)
+    spec = SweepSpec(base, scene_path.parent, mode, params, samples, seed, text + "\n---\n" + scene_text)
+    if mode == "grid" and np.prod([len(p.values) for p in params], dtype=float) > MAX_RUNS:
+        raise SceneError("parameters", f"the grid has more than {MAX_RUNS} runs")
+    return spec
+
+
+def _parameter(key: str, raw: Any, mode: str, base: dict) -> Parameter:
+    v.table(key, raw)
+    v.no_unknown_keys(key, raw, PARAM_KEYS)
+    path = raw.get("key")
+    if not isinstance(path, str):
+        raise SceneError(f"{key}.key", "expected a path into the scene such as \"contact.stiffness\"")
+    apply(copy.deepcopy(base), path, 0.0, where=f"{key}.key")  # the path exists in the base scene
+    dist = raw.get("distribution", "grid" if mode == "grid" else None)
+    if mode == "grid":
+        if dist != "grid":
+            raise SceneError(f"{key}.distribution", "a grid sweep takes values lists only")
+        return Parameter(path, _values(f"{key}.values", raw.get("values")))
+    dist = v.choice(f"{key}.distribution", dist, ("uniform", "normal", "choice"))
+    if dist == "choice":
+        return Parameter(path, _values(f"{key}.values", raw.get("values")), "choice")
+    if dist == "uniform":
+        lo = v.number(f"{key}.low", raw.get("low"), -1e12, 1e12)
+        hi = v.number(f"{key}.high", raw.get("high"), lo, 1e12)
+        return Parameter(path, (), "uniform", lo, hi)
+    return Parameter(path, (), "normal", v.number(f"{key}.mean", raw.get("mean"), -1e12, 1e12),
+                     v.number(f"{key}.sd", raw.get("sd"), 0.0, 1e12))
+
+
+def _values(key: str, raw: Any) -> tuple[Any, ...]:
+    if not isinstance(raw, list) or not raw:
+        raise SceneError(key, "expected a non-empty list of values")
+    for x in raw:
+        if not isinstance(x, (int, float, str, bool, list)):
+            raise SceneError(key, f"expected numbers, strings, booleans or lists, got {x!r}")
+    return tuple(raw)
+
+
+def apply(doc: dict, path: str, value: Any, where: str = "key") -> None:
+    """Set doc at a dotted path; [*] sets every element of a list."""
+    parts = path.split(".")
+    targets = [doc]
+    for n, part in enumerate(parts):
+        m = KEY_RE.fullmatch(part)
+        if not m:
+            raise SceneError(where, f"{path!r}: {part!r} is not a name, name[i] or name[*]")
+        name, index = m.groups()
+        last = n == len(parts) - 1
+        nxt = []
+        for t in targets:
+            if not isinstance(t, dict) or name not in t:
+                raise SceneError(where, f"{path!r}: the base scene has no {'.'.join(parts[:n + 1])!r} "
+                                        "(write the key into the scene, with its default, to sweep it)")
+            if index is None:
+                if last:
+                    t[name] = value
+                else:
+                    nxt.append(t[name])
+                continue
+            seq = t[name]
+            if not isinstance(seq, list):
+                raise SceneError(where, f"{path!r}: {name!r} is not a list")
+            idx = range(len(seq)) if index == "*" else [int(index)]
+            for i in idx:
+                if i >= len(seq):
+                    raise SceneError(where, f"{path!r}: {name!r} has only {len(seq)} entries")
+                if last:
+                    seq[i] = value
+                else:
+                    nxt.append(seq[i])
+        targets = nxt
+
+
+def scene_doc(spec: SweepSpec, inputs: dict[str, Any]) -> dict:
+    doc = copy.deepcopy(spec.base)
+    for key, value in inputs.items():
+        apply(doc, key, value)
+    return doc
+
+
+def canonical(inputs: dict[str, Any]) -> str:
+    return json.dumps(inputs, sort_keys=True)
