@@ -1,6 +1,7 @@
 """Runs a built FMU in a fresh process (never the one that built it) and prints JSON.
 
     python -m tests.fmu_driver fmpy FMU SIGNAL.csv STOP DT [--param NAME=VALUE ...]
+    python -m tests.fmu_driver summary FMU SIGNAL.csv STOP DT     (a cluster FMU's summary outputs)
     python -m tests.fmu_driver cosim FMU SIGNAL.csv STOP DT
     python -m tests.fmu_driver ecos FMU SIGNAL.csv STOP DT     (needs LD_LIBRARY_PATH=<venv>/lib for tbb)
     python -m tests.fmu_driver replay FMU SIGNAL.csv
@@ -86,6 +87,20 @@ def run_fmpy(path, rows, stop, dt, params=None):
         out.append([(k + 1) * dt] + f.get(OUTPUTS))
     count = f.fmu.getInteger([f.vr["collision_count"]])[0]
     return {"t_y": out, "collision_count": count}
+
+
+SUMMARY_REALS = ["peak_contact_force", "dissipated_energy", "max_contact_force", "max_pedicel_force"]
+SUMMARY_INTS = ["collision_count", "active_pairs", "berries_over_detachment_force", "bruising_impacts"]
+
+
+def run_summary(path, rows, stop, dt):
+    """A cluster FMU's summary outputs over a run."""
+    f = Fmu2(path)
+    out = []
+    for k in range(round(stop / dt)):
+        f.step(dt, *held(rows, k * dt))
+        out.append([(k + 1) * dt] + f.get(SUMMARY_REALS) + list(f.fmu.getInteger([f.vr[n] for n in SUMMARY_INTS])))
+    return {"rows": out, "variables": len(f.md.modelVariables)}
 
 
 def run_cosim(path, rows, stop, dt):
@@ -211,6 +226,8 @@ def main(argv):
         if cmd == "fmpy":
             params = dict(p.split("=") for p in argv[5:])
             out = run_fmpy(path, rows, float(argv[3]), float(argv[4]), {k: float(v) for k, v in params.items()})
+        elif cmd == "summary":
+            out = run_summary(path, rows, float(argv[3]), float(argv[4]))
         elif cmd == "cosim":
             out = run_cosim(path, rows, float(argv[3]), float(argv[4]))
         elif cmd == "ecos":

@@ -313,3 +313,46 @@ def test_replay_publish_republishes_the_recorded_topics(tmp_path):
     assert res["n"] > 0.5 * len(run.t), f"listener: {''.join(early)}{out}\nreplay: {r.stdout}{r.stderr}"
     k = int(round(res["last_ns"] / 1e6))
     assert res["last"] == list(run.angles[k])
+
+
+def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
+    """A 30-berry spherical cluster in lockstep: two angles per twig, the `contacts` and `summary` arrays
+    instead of one wrench topic per candidate pair, one marker per berry, all equal to the core."""
+    from visualization_msgs.msg import MarkerArray
+
+    from grapefmu.cli import main as cli
+    from grapefmu.recording.topics import CONTACT_FIELDS, SUMMARY_FIELDS
+
+    scene = tmp_path / "cluster.toml"
+    assert cli(["cluster", "--berries", "30", "--seed", "2", "-o", str(scene)]) == 0
+    rows = [(k * 0.01, float(8.0 * math.sin(2 * math.pi * 3 * k * 0.01))) for k in range(60)]
+    with sim_node(tmp_path, extra=["-p", f"scene:={scene}", "-p", "marker_rate_hz:=50.0"]) as (proc, rec):
+        ctl = Controller("cluster_controller")
+        summaries, contacts, markers = [], [], []
+        ctl.node.create_subscription(Float64MultiArray, "summary", summaries.append, QOS)
+        ctl.node.create_subscription(Float64MultiArray, "contacts", contacts.append, QOS)
+        ctl.node.create_subscription(MarkerArray, "markers", markers.append, QOS)
+        ctl.connect()
+        assert not [n for n, _ in ctl.node.get_topic_names_and_types() if n.endswith("/wrench")]
+        drive(ctl, rows)
+        ctl.spin(0.5)
+        ctl.close()
+    solver = Solver(load_scene(scene))
+    for (_, a), (t1, _) in zip(rows, rows[1:]):
+        solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, (a, 0.0))
+    t_last = rows[-1][0]
+    last = ctl.state_at(t_last)
+    assert len(last.name) == 60 and last.name[:2] == ["twig_b000_swing", "twig_b000_tilt"]
+    np.testing.assert_array_equal(last.position, solver.angles)
+    fields = summaries[-1].layout.dim[0].label.split(",")
+    assert fields == list(SUMMARY_FIELDS)
+    final = [s for s in summaries if s.data[0] == pytest.approx(t_last, abs=1e-12)][-1]
+    assert final.data[fields.index("active_pairs")] == np.count_nonzero(solver.modes)
+    assert final.data[fields.index("peak_contact_force_n")] == solver.state.peak_force.max()
+    assert max(s.data[fields.index("active_pairs")] for s in summaries) > 0
+    busy = [c for c in contacts if c.data]
+    assert busy and busy[0].layout.dim[0].label == ",".join(CONTACT_FIELDS)
+    assert all(len(c.data) == 3 * c.layout.dim[0].size for c in contacts)
+    spheres = [m for m in markers[-1].markers if m.ns == "berries"]
+    assert len(spheres) == 30 and len({round(m.pose.position.z, 6) for m in spheres}) > 10
+    assert check(rec).max_deviation == 0.0

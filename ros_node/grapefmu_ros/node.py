@@ -74,7 +74,7 @@ class SimulatorNode(Node):
         self.scene = load_scene(gp("scene"))
         m = self.scene.model
         self.names = m.names
-        self.joints = T.joint_names(m)
+        self.joints = m.dof_names  # joint_state() names them twig_<angle>
         self.pair_topics = [f"contact/{m.pair_name(p)}/wrench" for p in range(len(m.pairs))] if T.per_pair_topics(m) else []
         self.recorder = McapRecorder(gp("record"), metadata(self.scene, self.mode, self.rate)) if gp("record") else None
         self.pub_js = self.create_publisher(JointState, "joint_states", STATE_QOS)

@@ -153,6 +153,9 @@ def cmd_replay(a: argparse.Namespace) -> int:
 
 
 def cmd_bench(a: argparse.Namespace) -> int:
+    if a.scale:
+        from .bench.scale import main as scale
+        return scale(Path(a.out), Path(a.plots))
     from .bench.harness import main as bench
     return bench(a.quick, Path(a.out), Path(a.plots))
 
@@ -186,6 +189,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.set_defaults(func=cmd_replay)
     be = sub.add_parser("bench", help="speed against error on hard scenes, side by side with peer methods")
     be.add_argument("--quick", action="store_true", help="two scenes, few settings (under a minute)")
+    be.add_argument("--scale", action="store_true", help="cost against the number of berries, N = 2 … 300 "
+                                                          "(rewrites only its own section of the report)")
     be.add_argument("--out", default="docs/benchmarks.md", help="the Markdown report to write")
     be.add_argument("--plots", default="docs/bench", help="directory for one work–precision plot per scene")
     be.set_defaults(func=cmd_bench)

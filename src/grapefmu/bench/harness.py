@@ -271,6 +271,10 @@ def main(quick: bool, out: Path, plot_dir: Path) -> int:
     text = markdown(rows, refused, compile_s, command, rel, quick)
     with atomic_path(out) as tmp:
         tmp.write_text(text)
+    scale = plot_dir / "scale.md"
+    if scale.exists() and not quick:  # keep the scale section (grapefmu bench --scale) in the report
+        from .scale import insert_section
+        insert_section(out, scale.read_text())
     print(text)
     print(f"wrote {out} and {len(files)} plots in {plot_dir} ({time.perf_counter() - t0:.0f} s)")
     return 0

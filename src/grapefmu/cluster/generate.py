@@ -149,6 +149,8 @@ class RowSpec:
     radius: float = 0.0135
     twig_length: float = 0.03
     pitch: float = 0.027                  # m between neighbouring hinges; 2·radius: touching at rest
+    twig_spread: float = 0.0              # relative sd of the twig lengths (0: identical berries)
+    seed: int = 1
     hinge_stiffness: float = 1e-3
     hinge_damping: float = 2e-5
     angles: tuple[float, ...] = ()        # rad per berry; default: the first pulled back 30°
@@ -168,7 +170,10 @@ def row_scene(spec: RowSpec) -> dict[str, Any]:
     angles = list(spec.angles) or [-math.radians(30.0)] + [0.0] * (n - 1)
     if len(angles) != n:
         raise SceneError("row.angles", f"expected {n} angles (one per berry), got {len(angles)}")
-    berries = [{"name": f"b{i:03d}", "mass": spec.mass, "radius": spec.radius, "twig_length": spec.twig_length,
+    rng = np.random.default_rng(spec.seed)
+    lengths = [Spread(spec.twig_length, spec.twig_spread * spec.twig_length).draw(rng, lo=1.2 * spec.radius)
+               for _ in range(n)]
+    berries = [{"name": f"b{i:03d}", "mass": spec.mass, "radius": spec.radius, "twig_length": lengths[i],
                 "hinge_x": (i - (n - 1) / 2) * spec.pitch, "hinge_stiffness": spec.hinge_stiffness,
                 "hinge_damping": spec.hinge_damping, "angle": float(angles[i]), "angular_velocity": 0.0}
                for i in range(n)]

@@ -138,6 +138,10 @@ class SolverSettings:
     fixed_step: float = 0.0
     zeno_window: float = 1e-3
     zeno_max_events: int = 64
+    #: "events": every contact onset and release is located (needed for Kelvin–Voigt's force jump);
+    #: "step-control": the smooth laws (Hertz, Hunt–Crossley) are evaluated inline and the step-size
+    #: control alone resolves their onsets (docs/benchmarks.md measures which is cheaper where)
+    contact_location: str = "events"
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,8 @@ EXCITATION_KEYS = {
     "pick-and-place": {"kind", "moves", "start", "jerk_fraction"},
     "csv": {"kind", "file", "hold"},
 }
-SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events"}
+SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events",
+               "contact_location"}
 THRESHOLD_KEYS = {"detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction"}
 
 
@@ -106,9 +107,9 @@ def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
         if radius >= length:
             raise SceneError(f"{key}.radius", f"must be smaller than twig_length ({length:g} m), got {radius:g} m")
         if "hinge_x" in b:
-            hinge = (v.number(f"{key}.hinge_x", b["hinge_x"], -1.0, 1.0, unit="m"), 0.0, 0.0)
+            hinge = (v.number(f"{key}.hinge_x", b["hinge_x"], -10.0, 10.0, unit="m"), 0.0, 0.0)
         else:
-            hinge = v.vector(f"{key}.hinge", b["hinge"], 3, -1.0, 1.0, "m")
+            hinge = v.vector(f"{key}.hinge", b["hinge"], 3, -10.0, 10.0, "m")
         kh = v.number(f"{key}.hinge_stiffness", b.get("hinge_stiffness", 0.0), 0.0, 1e3, unit="N·m/rad")
         ch = v.number(f"{key}.hinge_damping", b.get("hinge_damping", 0.0), 0.0, 1e3, unit="N·m·s/rad")
         spherical = v.choice(f"{key}.kind", b.get("kind", "planar"), ("planar", "spherical")) == "spherical"
@@ -265,6 +266,8 @@ def _solver(raw: Any) -> SolverSettings:
         zeno_window=v.number(f"{key}.zeno_window", raw.get("zeno_window", d.zeno_window), 0.0, 10.0,
                              lo_open=True, unit="s"),
         zeno_max_events=v.integer(f"{key}.zeno_max_events", raw.get("zeno_max_events", d.zeno_max_events), 2, 10**6),
+        contact_location=v.choice(f"{key}.contact_location", raw.get("contact_location", d.contact_location),
+                                  ("events", "step-control")),
     )
 
 

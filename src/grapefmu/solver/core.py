@@ -27,7 +27,7 @@ T, H, T_PREV, H_LAST, GRID_T0, GRID_DT, HELD_AX, HELD_AY = range(8)
 (N_STEPS, N_REJECTED, N_RHS, N_SWITCHES, N_IMPACTS, N_ZENO, BREAK_IDX, GRID_K, N_OUT, N_IMP, STATUS, HELD,
  N_NEAR, N_REBUILDS, NEAR_SUM) = range(15)
 # slots of cfg
-RTOL, ATOL, FIXED, ZENO_WIN, LOCATE, HMAX, SKIN = range(7)
+RTOL, ATOL, FIXED, ZENO_WIN, LOCATE, HMAX, SKIN, STEP_CONTROL = range(8)
 # statuses
 DONE, OUT_FULL, IMP_FULL, MAX_STEPS, STEP_UNDERFLOW, NOT_FINITE = range(6)
 # columns of an impact row
@@ -174,6 +174,8 @@ def switch_pair(p, new_mode, t, delta_dot, S, B, cfg):
         S.it[N_IMP] = k + 1
     S.mode[p] = new_mode
     S.it[N_SWITCHES] += 1
+    if S.smooth_until[p] == np.inf:
+        return  # a smooth law under step-size control: no events, so no Zeno guard either
     kz = S.ring.shape[1]
     pos = S.ring_pos[p]
     S.ring[p, pos] = t
@@ -383,12 +385,16 @@ def find_event(y0, q, h, t0, M, S, vbuf, ytmp, work):
 @jit
 def rebuild_near(S, M, pos, skin):
     """The broad phase (a Verlet list): keep the candidate pairs closer than `skin` at the berry
-    centres pos, and every pair in contact. It stays valid while no berry moves skin/2 from pos."""
+    centres pos, and every pair in contact. It stays valid while no berry moves skin/2 from pos.
+    A smooth law under step-size control is evaluated inline exactly for its near pairs."""
     nn = 0
     for p in range(S.mode.shape[0]):
         i, j = M.pair_idx[p, 0], M.pair_idx[p, 1]
         d = math.sqrt((pos[j, 0] - pos[i, 0]) ** 2 + (pos[j, 1] - pos[i, 1]) ** 2 + (pos[j, 2] - pos[i, 2]) ** 2)
-        if d - M.berry[i, 1] - M.berry[j, 1] < skin or S.mode[p] != 0 or S.smooth[p]:
+        near = d - M.berry[i, 1] - M.berry[j, 1] < skin or S.mode[p] != 0
+        if S.smooth_until[p] == np.inf:
+            S.smooth[p] = near
+        if near or S.smooth[p]:
             S.near[nn] = p
             nn += 1
     S.it[N_NEAR] = nn
@@ -418,18 +424,26 @@ def travel(y0, q, h, M, ref, work, pos):
 
 
 @jit
-def keep_near_valid(y0, q, h, M, S, skin, work, pos):
-    """Rebuild the near list when a berry could have left its skin during this step. A step that
-    itself travels more than skin/2 gets a list with a skin wide enough for it."""
+def keep_near_valid(y0, q, h, M, S, skin, work, pos, step_control):
+    """Keep the near list valid over this step. Returns how far a berry got from the list's
+    reference (the caller rebuilds after the step once that passes skin/4), or −1: retry shorter.
+
+    Up to skin/2 the list holds for the whole step. Beyond, a pair outside the list could have
+    touched inside this step: with event location the list is rebuilt from the step's start (wide
+    enough for the step) and the events search it; under step-size control the forces of such a
+    pair were missing from the stages, so the step is refused."""
     if S.mode.shape[0] == 0 or not math.isfinite(skin):
-        return
-    if travel(y0, q, h, M, S.ref, work, pos) <= 0.5 * skin:
-        return
+        return 0.0
+    reach = travel(y0, q, h, M, S.ref, work, pos)
+    if reach <= 0.5 * skin:
+        return reach
+    if step_control:
+        return -1.0
     rebuild_near(S, M, pos[0], skin)
     reach = travel(y0, q, h, M, S.ref, work, pos)
     if reach > 0.5 * skin:
         rebuild_near(S, M, pos[0], 2.0 * reach * 1.001)
-        S.ref[0, 0] = math.inf  # force a fresh list on the next step
+    return math.inf  # rebuild again from the committed state
 
 
 @jit
@@ -535,7 +549,11 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
                     acc += stages[m, r] * TB.p[m, j]
                 q[r, j] = acc
         # --- broad phase, then the earliest contact switch inside the step
-        keep_near_valid(S.y, q, h, M, S, cfg[SKIN], work, pos)
+        reach = keep_near_valid(S.y, q, h, M, S, cfg[SKIN], work, pos, cfg[STEP_CONTROL] > 0.5)
+        if reach < 0.0:
+            S.fl[H] = 0.5 * h
+            S.it[N_REJECTED] += 1
+            continue
         S.it[NEAR_SUM] += S.it[N_NEAR]
         theta_e = 1.0
         event = False
@@ -581,6 +599,10 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
         changed = False
         for kk in range(S.it[N_NEAR]):
             p = S.near[kk]
+            if S.smooth[p] and S.smooth_until[p] == np.inf:
+                new, dd = classify(p, S.y, M, S.v_onset, S.mode[p])  # impacts booked at step ends
+                switch_pair(p, new, t_commit, dd, S, B, cfg)
+                continue
             if S.smooth[p]:
                 if t_commit >= S.smooth_until[p]:
                     c0 = cls[0, kk]
@@ -599,6 +621,11 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
                 if new != S.mode[p]:
                     switch_pair(p, new, t_commit, dd, S, B, cfg)
                     changed = True
+        if reach > 0.25 * cfg[SKIN]:
+            # rebuild early, from where the step ended, so the list stays valid for the next steps
+            centres(S.y, M, pos[0])
+            rebuild_near(S, M, pos[0], cfg[SKIN])
+            changed = True  # smooth flags may have changed
         if changed or event or (bi < nbreak and t_commit >= X.breaks[bi]):
             rhs(t_commit, t_commit, S.y, S.f, S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
             S.it[N_RHS] += 1

@@ -126,8 +126,9 @@ class Solver:
         self.npair = len(self.model.pairs)
         if skin is None:
             skin = SKIN_FRACTION * float(np.mean([b.radius for b in self.model.berries]))
+        step_control = s.contact_location == "step-control" and self.method == "event"
         self.cfg = np.array([self.rtol, self.atol, self.fixed_step, s.zeno_window,
-                             1.0 if self.method == "event" else 0.0, math.inf, skin])
+                             1.0 if self.method == "event" else 0.0, math.inf, skin, float(step_control)])
         self._held_arrays = constant(1.0, 0.0).arrays  # reused for every held input: no allocation per step
         self._closed: list[np.ndarray] = []
         self.state = self._fresh_state(scene.initial_state, s.zeno_max_events)
@@ -147,6 +148,8 @@ class Solver:
                         np.zeros(npair), np.zeros((p, 6)), np.full((p, zeno_max), -np.inf),
                         np.zeros(p, dtype=np.int64), np.zeros(npair), np.full(n, -np.inf), np.zeros((npair, 2)),
                         np.zeros(npair, dtype=np.int64), np.zeros((n, 3)))
+        if self.cfg[core.STEP_CONTROL]:
+            S.smooth_until[self.M.pair_law != 0] = np.inf  # hertz, hunt-crossley: no force jump at onset
         _initial_modes(S, self.M, self.cfg[core.SKIN])
         self._refresh_derivative(S)
         return S
