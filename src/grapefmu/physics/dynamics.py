@@ -87,9 +87,10 @@ def pair_kinematics(y, M, i, j, nd):
     li, lj = b[i, 2], b[j, 2]
     uxi, uyi, uzi, vxi, vyi, vzi = twig(y, M, i, nd)
     uxj, uyj, uzj, vxj, vyj, vzj = twig(y, M, j, nd)
-    dx = b[j, 3] + lj * uxj - b[i, 3] - li * uxi
-    dy = b[j, 6] + lj * uyj - b[i, 6] - li * uyi
-    dz = b[j, 7] + lj * uzj - b[i, 7] - li * uzi
+    # grouped as centre minus centre, so δ is bit for bit what centres() gives (the event search uses both)
+    dx = (b[j, 3] + lj * uxj) - (b[i, 3] + li * uxi)
+    dy = (b[j, 6] + lj * uyj) - (b[i, 6] + li * uyi)
+    dz = (b[j, 7] + lj * uzj) - (b[i, 7] + li * uzi)
     d = math.sqrt(dx * dx + dy * dy + dz * dz)
     if d > 1e-15:
         nx, ny, nz = dx / d, dy / d, dz / d

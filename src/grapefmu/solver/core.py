@@ -325,19 +325,29 @@ def _max_on(fn, sign, p, a, b, y0, q, h, M, v_onset, work):
 
 
 @jit
-def find_event(y0, q, h, t0, M, S, vbuf, ytmp, work):
+def find_event(y0, q, h, t0, M, S, vbuf, ytmp, work, pos):
     """Earliest θ in (0, 1] where a watched contact function of a near pair turns positive, or (1, False).
 
     Each function is sampled at N_SAMPLES + 1 points. A sign change gives a bracket at once;
     a sampled local maximum that is still ≤ 0 but close to zero is refined by a golden-section
-    search, so a graze that opens and closes between two samples is not missed."""
+    search, so a graze that opens and closes between two samples is not missed. A pair apart only
+    watches δ, read from the berry centres the broad phase already sampled (pos); no trigonometry."""
     nnear = S.it[N_NEAR]
     m = 2 * M.dof[M.berry.shape[0]]
+    b = M.berry
     tol = max(ROOT_TOL, 8 * 2.2e-16 * abs(t0))
     for k in range(N_SAMPLES + 1):
         dense_head(k / N_SAMPLES, y0, q, h, work, m)
         for kk in range(nnear):
             p = S.near[kk]
+            if S.mode[p] == 0:
+                i, j = M.pair_idx[p, 0], M.pair_idx[p, 1]
+                dx = pos[k, j, 0] - pos[k, i, 0]
+                dy = pos[k, j, 1] - pos[k, i, 1]
+                dz = pos[k, j, 2] - pos[k, i, 2]
+                vbuf[k, 2 * kk] = b[i, 1] + b[j, 1] - math.sqrt(dx * dx + dy * dy + dz * dz)
+                vbuf[k, 2 * kk + 1] = -1.0
+                continue
             na, f1, s1, f2, s2 = active_events(S.mode[p], M.pair_law[p], M.pair_par[p])
             vbuf[k, 2 * kk] = event_value(f1, s1, p, work, M, S.v_onset)
             vbuf[k, 2 * kk + 1] = event_value(f2, s2, p, work, M, S.v_onset) if na == 2 else -1.0
@@ -432,9 +442,11 @@ def keep_near_valid(y0, q, h, M, S, skin, work, pos, step_control):
     touched inside this step: with event location the list is rebuilt from the step's start (wide
     enough for the step) and the events search it; under step-size control the forces of such a
     pair were missing from the stages, so the step is refused."""
-    if S.mode.shape[0] == 0 or not math.isfinite(skin):
+    if S.mode.shape[0] == 0:
         return 0.0
-    reach = travel(y0, q, h, M, S.ref, work, pos)
+    reach = travel(y0, q, h, M, S.ref, work, pos)  # also fills pos, which the event search reads
+    if not math.isfinite(skin):
+        return 0.0
     if reach <= 0.5 * skin:
         return reach
     if step_control:
@@ -558,7 +570,7 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
         theta_e = 1.0
         event = False
         if locate:
-            theta_e, event = find_event(S.y, q, h, t0, M, S, vbuf, ytmp, work)
+            theta_e, event = find_event(S.y, q, h, t0, M, S, vbuf, ytmp, work, pos)
         t_commit = t_new if not event or theta_e >= 1.0 else t0 + theta_e * h
         # --- grid output in (t0, t_commit]
         dt_out = S.fl[GRID_DT]
