@@ -238,6 +238,28 @@ def centres(y, M, pos):
         pos[i, 2] = b[i, 7] + b[i, 2] * uz
 
 
+@inline
+def push_pair(fext, i, j, f, nx, ny, nz):
+    """The pair's force on both berries: +F n on j, −F n on i."""
+    fext[i, 0] -= f * nx
+    fext[i, 1] -= f * ny
+    fext[i, 2] -= f * nz
+    fext[j, 0] += f * nx
+    fext[j, 1] += f * ny
+    fext[j, 2] += f * nz
+
+
+@jit
+def pair_rates(y, mode, v_onset, smooth, M, force, power):
+    """Each pair's force and dissipation power (what the scipy reference integrates per pair)."""
+    for p in range(M.pair_idx.shape[0]):
+        if mode[p] == 0 and not smooth[p]:
+            force[p] = 0.0
+            power[p] = 0.0
+            continue
+        force[p], power[p] = pair_force(p, y, mode, v_onset, smooth, M)[:2]
+
+
 @jit
 def coupling_loads(y, M, fext):
     """Reset the per-berry inter-berry forces fext (N, 3) to the coupling forces alone."""
@@ -267,13 +289,7 @@ def berry_forces(y, mode, v_onset, smooth, M, force, penetration, fext):
         f, _, delta, _, nx, ny, nz = pair_force(p, y, mode, v_onset, smooth, M)
         force[p] = f
         penetration[p] = max(delta, 0.0)
-        i, j = M.pair_idx[p, 0], M.pair_idx[p, 1]
-        fext[i, 0] -= f * nx
-        fext[i, 1] -= f * ny
-        fext[i, 2] -= f * nz
-        fext[j, 0] += f * nx
-        fext[j, 1] += f * ny
-        fext[j, 2] += f * nz
+        push_pair(fext, M.pair_idx[p, 0], M.pair_idx[p, 1], f, nx, ny, nz)
 
 
 @jit

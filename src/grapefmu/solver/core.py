@@ -15,7 +15,7 @@ import numba as nb
 import numpy as np
 
 from ..physics.dynamics import (HC_MIN_APPROACH_SPEED, base_accel, centres, contact_law, coupling_loads, jit,
-                                pair_force, pair_kinematics, pedicel_tension, rhs)
+                                pair_force, pair_kinematics, pedicel_tension, push_pair, rhs)
 
 #: the right-hand side inlined into the stage loop only: a compiled call passing a dozen arrays costs
 #: more in reference counting than two berries' arithmetic, and inlining it everywhere doubles compile time
@@ -227,13 +227,7 @@ def sample_step(t0, h, theta_end, y0, q, M, X, S, work, fbuf, pwbuf, fext, tens,
             f, power, _, _, nx, ny, nz = pair_force(p, work, S.mode, S.v_onset, S.smooth, M)
             fbuf[k, kk] = f
             pwbuf[k, kk] = power
-            i, j = M.pair_idx[p, 0], M.pair_idx[p, 1]
-            fext[i, 0] -= f * nx
-            fext[i, 1] -= f * ny
-            fext[i, 2] -= f * nz
-            fext[j, 0] += f * nx
-            fext[j, 1] += f * ny
-            fext[j, 2] += f * nz
+            push_pair(fext, M.pair_idx[p, 0], M.pair_idx[p, 1], f, nx, ny, nz)
             if S.smooth[p]:
                 cls[k, kk] = classify(p, work, M, S.v_onset, S.mode[p])[0]
         ax, az = base_accel(X.kind, X.par, X.table, t0 + th * h, t0)

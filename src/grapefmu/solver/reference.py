@@ -19,7 +19,7 @@ from scipy.optimize import minimize_scalar
 
 from ..errors import SolverError
 from ..model.model import Scene
-from ..physics.dynamics import HC_MIN_APPROACH_SPEED, base_accel, pair_force, rhs
+from ..physics.dynamics import HC_MIN_APPROACH_SPEED, base_accel, pair_force, pair_rates, rhs
 from ..physics.layout import layout
 from . import core
 
@@ -78,8 +78,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
 
     def f(tt, yy):
         rhs(tt, seg_start_piece, yy, dy, st.mode, st.v_onset, st.smooth, M, X.kind, X.par, X.table)
-        for p in range(npair):
-            dy[ny + p], dy[ny + npair + p] = pair_force(p, yy, st.mode, st.v_onset, st.smooth, M)[:2]
+        pair_rates(yy, st.mode, st.v_onset, st.smooth, M, dy[ny: ny + npair], dy[ny + npair:])
         return dy.copy()
 
     def make_event(p, fn, sign, t_seg):
