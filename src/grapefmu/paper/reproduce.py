@@ -140,12 +140,12 @@ def draw_figures(r: dict[str, Run], out: Path) -> list[Path]:
         run = r[name]
         pos = run.positions
         for i, bn in enumerate(run.scene.model.names):
-            a.plot(pos[:, i, 0] * 1e3, pos[:, i, 1] * 1e3, lw=0.8, label=bn)
-            a.plot(pos[0, i, 0] * 1e3, pos[0, i, 1] * 1e3, "o")
+            a.plot(pos[:, i, 0] * 1e3, pos[:, i, 2] * 1e3, lw=0.8, label=bn)
+            a.plot(pos[0, i, 0] * 1e3, pos[0, i, 2] * 1e3, "o")
         a.set_aspect("equal")
         a.set_title(title)
         a.set_xlabel("x (mm)")
-        a.set_ylabel("y (mm)")
+        a.set_ylabel("z (mm)")
         a.legend(fontsize=8)
     save(fig, "fig09_trajectories.png")
 

@@ -152,7 +152,10 @@ def pair_force(p, y, mode, v_onset, smooth, M):
 
 @jit
 def rhs(t, t_ref, y, dy, mode, v_onset, smooth, M, ekind, epar, etab):
-    """dy/dt: Lagrange's equations of docs/model.md §2–6 with generalized forces Q = l Jᵀ F."""
+    """dy/dt: Lagrange's equations of docs/model.md §2–6 with generalized forces Q = l Jᵀ F.
+
+    A dy longer than the state by 2P also gets each pair's force and dissipation power at its end:
+    the scipy reference integrates those per pair, the event solver by quadrature."""
     berry = M.berry
     n = berry.shape[0]
     nd = M.dof[n]
@@ -199,11 +202,18 @@ def rhs(t, t_ref, y, dy, mode, v_onset, smooth, M, ekind, epar, etab):
         torque[oj] -= fc * lj * cj
         dy[o_dc + k] = M.coup_par[k, 1] * sepd * sepd
     diss = 0.0
+    o_pair = o_dc + nc + 6  # the state's size
+    per_pair = dy.shape[0] == o_pair + 2 * npair
+    if per_pair:
+        dy[o_pair:] = 0.0
     for p in range(npair):
         if mode[p] == 0 and not smooth[p]:
             continue
         f, power, _, _, nx, ny, nz = pair_force(p, y, mode, v_onset, smooth, M)
         diss += power
+        if per_pair:
+            dy[o_pair + p] = f
+            dy[o_pair + npair + p] = power
         if f != 0.0:
             add_force(y, M, M.pair_idx[p, 1], nd, f * nx, f * ny, f * nz, torque)
             add_force(y, M, M.pair_idx[p, 0], nd, -f * nx, -f * ny, -f * nz, torque)
@@ -247,17 +257,6 @@ def push_pair(fext, i, j, f, nx, ny, nz):
     fext[j, 0] += f * nx
     fext[j, 1] += f * ny
     fext[j, 2] += f * nz
-
-
-@jit
-def pair_rates(y, mode, v_onset, smooth, M, force, power):
-    """Each pair's force and dissipation power (what the scipy reference integrates per pair)."""
-    for p in range(M.pair_idx.shape[0]):
-        if mode[p] == 0 and not smooth[p]:
-            force[p] = 0.0
-            power[p] = 0.0
-            continue
-        force[p], power[p] = pair_force(p, y, mode, v_onset, smooth, M)[:2]
 
 
 @jit

@@ -19,7 +19,7 @@ from scipy.optimize import minimize_scalar
 
 from ..errors import SolverError
 from ..model.model import Scene
-from ..physics.dynamics import HC_MIN_APPROACH_SPEED, base_accel, pair_force, pair_rates, rhs
+from ..physics.dynamics import HC_MIN_APPROACH_SPEED, base_accel, pair_force, rhs
 from ..physics.layout import layout
 from . import core
 
@@ -57,8 +57,8 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     ny = lay.size
     st = _State(npair)
     rows, open_imp = [], {}
-    # the reference integrates each pair's impulse and dissipation as extra ODE components
-    # (the event solver uses quadrature instead), so the two check each other
+    # the reference integrates each pair's impulse and dissipation as extra ODE components, which
+    # rhs fills when dy has room for them (the event solver uses quadrature), so the two check each other
     y = np.zeros(ny + 2 * npair)
     y[: 2 * lay.d] = scene.initial_state
     for p in range(npair):
@@ -78,7 +78,6 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
 
     def f(tt, yy):
         rhs(tt, seg_start_piece, yy, dy, st.mode, st.v_onset, st.smooth, M, X.kind, X.par, X.table)
-        pair_rates(yy, st.mode, st.v_onset, st.smooth, M, dy[ny: ny + npair], dy[ny + npair:])
         return dy.copy()
 
     def make_event(p, fn, sign, t_seg):
