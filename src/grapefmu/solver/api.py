@@ -17,10 +17,14 @@ def simulate(scene: Scene, t_end: float | None = None, *, method: str | None = N
     method = method or scene.solver.method
     if method == "reference":
         from .reference import simulate_reference
-        return run_by_group(scene, lambda sc: simulate_reference(sc, t_end, rtol=rtol, atol=atol,
-                                                                 output_interval=output_interval))
-    return run_by_group(scene, lambda sc: Solver(sc, method=method, rtol=rtol, atol=atol, fixed_step=fixed_step)
-                        .run(t_end, output_interval, progress))
+        return run_by_group(scene, lambda sc, *_: simulate_reference(sc, t_end, rtol=rtol, atol=atol,
+                                                                     output_interval=output_interval))
+
+    def one(sc: Scene, done: float, share: float) -> Run:
+        hook = None if progress is None else lambda t, te: progress((done + share * t / te) * te, te)
+        return Solver(sc, method=method, rtol=rtol, atol=atol, fixed_step=fixed_step).run(t_end, output_interval, hook)
+
+    return run_by_group(scene, one)
 
 
 __all__ = ["Solver", "simulate"]

@@ -51,12 +51,17 @@ def sub_scene(scene: Scene, members: list[int]) -> Scene:
                    angular_velocities=tuple(scene.angular_velocities[k] for k in idx))
 
 
-def run_by_group(scene: Scene, simulate_one: Callable[[Scene], Run]) -> Run:
-    """simulate_one on each group, merged into one Run of the whole scene."""
+def run_by_group(scene: Scene, simulate_one: Callable[[Scene, float, float], Run]) -> Run:
+    """simulate_one(sub_scene, done, share) on each group, merged into one Run of the whole scene;
+    done and share place the group's progress within the whole run's (fractions of the work)."""
     parts = groups(scene.model)
     if len(parts) == 1:
-        return simulate_one(scene)
-    runs = [simulate_one(sub_scene(scene, members)) for members in parts]
+        return simulate_one(scene, 0.0, 1.0)
+    total = scene.model.n_berries
+    runs, done = [], 0
+    for members in parts:
+        runs.append(simulate_one(sub_scene(scene, members), done / total, len(members) / total))
+        done += len(members)
     return merge(scene, parts, runs)
 
 
