@@ -65,6 +65,17 @@ def dense_head(theta, y0, q, h, out, m):
 
 
 @jit
+def combine(coef, stages, count, out):
+    """out = Σ_{m < count} coef[m] · stages[m], summed in m order for every element."""
+    out[:] = 0.0
+    for m in range(count):
+        c = coef[m]
+        row = stages[m]
+        for r in range(out.shape[0]):
+            out[r] += c * row[r]
+
+
+@jit
 def rms_norm(x, scale):
     s = 0.0
     for i in range(x.shape[0]):
@@ -465,6 +476,7 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
     err_exp = -1.0 / (TB.error_order + 1.0)
     stages = S.k
     ytmp = np.empty(ny)
+    acc_row = np.empty(ny)
     ynew = np.empty(ny)
     err = np.empty(ny)
     scale = np.empty(ny)
@@ -508,19 +520,17 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
             clipped = True
         t_new = t_stop if clipped else t0 + h
         # --- one Runge–Kutta trial step
+        # the linear combinations run stage by stage over the whole vector (contiguous, so they
+        # vectorise); each element still sums its terms in the same order as a per-element loop
         stages[0, :] = S.f
         for st in range(1, ns):
+            combine(TB.a[st], stages, st, acc_row)
             for r in range(ny):
-                acc = 0.0
-                for m in range(st):
-                    acc += TB.a[st, m] * stages[m, r]
-                ytmp[r] = S.y[r] + h * acc
+                ytmp[r] = S.y[r] + h * acc_row[r]
             rhs_stage(t0 + TB.c[st] * h, t0, ytmp, stages[st], S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
+        combine(TB.b, stages, ns, acc_row)
         for r in range(ny):
-            acc = 0.0
-            for m in range(ns):
-                acc += TB.b[m] * stages[m, r]
-            ynew[r] = S.y[r] + h * acc
+            ynew[r] = S.y[r] + h * acc_row[r]
         rhs_stage(t_new, t0, ynew, stages[ns], S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
         S.it[N_RHS] += ns
         finite = True
@@ -533,11 +543,9 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
                 return NOT_FINITE
             en = 0.0
         else:
+            combine(TB.e, stages, ns + 1, acc_row)
             for r in range(ny):
-                acc = 0.0
-                for m in range(ns + 1):
-                    acc += TB.e[m] * stages[m, r]
-                err[r] = h * acc
+                err[r] = h * acc_row[r]
                 scale[r] = cfg[ATOL] + cfg[RTOL] * max(abs(S.y[r]), abs(ynew[r]))
             en = rms_norm(err, scale) if finite else np.inf
             if not (en <= 1.0):
@@ -548,12 +556,10 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
                     return STEP_UNDERFLOW if finite else NOT_FINITE
                 continue
         # --- accepted: dense-output coefficients
-        for r in range(ny):
-            for j in range(kd):
-                acc = 0.0
-                for m in range(ns + 1):
-                    acc += stages[m, r] * TB.p[m, j]
-                q[r, j] = acc
+        for j in range(kd):
+            combine(TB.p[:, j], stages, ns + 1, acc_row)
+            for r in range(ny):
+                q[r, j] = acc_row[r]
         # --- broad phase, then the earliest contact switch inside the step
         reach = keep_near_valid(S.y, q, h, M, S, cfg[SKIN], work, pos, cfg[STEP_CONTROL] > 0.5)
         if reach < 0.0:
