@@ -8,8 +8,30 @@ from grapefmu import __version__
 from .core import FmuCore
 
 
+def kinds(causality, variability, initial) -> dict[tuple[str, bool], dict]:
+    """Registration keywords per (causality, is real) from one FMI version's enums (same member names
+    in FMI 2.0 and 3.0): inputs and outputs continuous when real, parameters fixed, outputs exact."""
+    out = {}
+    for real in (True, False):
+        var = variability.continuous if real else variability.discrete
+        out["input", real] = {"causality": causality.input, "variability": var}
+        out["output", real] = {"causality": causality.output, "variability": var, "initial": initial.exact}
+        out["parameter", real] = {"causality": causality.parameter, "variability": variability.fixed,
+                                  "initial": initial.exact}
+    return out
+
+
 class GrapeSlaveMixin:
     scene_file = "scene.toml"
+    TYPES: dict            # per FMI version: the variable class of each type
+    KINDS: dict            # per FMI version: kinds(...)
+    UNITS = False          # whether the version's variables carry a unit
+
+    def _register(self, var) -> None:
+        kw = {"description": var.description, **self._accessors(var.name), **self.KINDS[var.causality, var.type == "real"]}
+        if self.UNITS and var.type == "real" and var.unit not in ("", "1"):
+            kw["unit"] = var.unit
+        self.register_variable(self.TYPES[var.type](var.name, **kw))
 
     def _setup(self, kwargs) -> None:
         self.core = FmuCore(Path(kwargs.get("resources") or ".") / self.scene_file)

@@ -6,29 +6,18 @@ from __future__ import annotations
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Status
 
-from .common import GrapeSlaveMixin
-
-TYPES = {"real": Real, "integer": Integer, "boolean": Boolean}
+from .common import GrapeSlaveMixin, kinds
 
 
 class GrapeFmi2Slave(GrapeSlaveMixin, Fmi2Slave):
+    TYPES = {"real": Real, "integer": Integer, "boolean": Boolean}
+    KINDS = kinds(Fmi2Causality, Fmi2Variability, Fmi2Initial)
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._setup(kwargs)
         for var in self.core.vars:
             self._register(var)
-
-    def _register(self, var):
-        kw = {"description": var.description, **self._accessors(var.name)}
-        if var.causality == "input":
-            kw.update(causality=Fmi2Causality.input,
-                      variability=Fmi2Variability.continuous if var.type == "real" else Fmi2Variability.discrete)
-        elif var.causality == "output":
-            kw.update(causality=Fmi2Causality.output, initial=Fmi2Initial.exact,
-                      variability=Fmi2Variability.continuous if var.type == "real" else Fmi2Variability.discrete)
-        else:
-            kw.update(causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed, initial=Fmi2Initial.exact)
-        self.register_variable(TYPES[var.type](var.name, **kw))
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         self.start_time = float(start_time or 0.0)

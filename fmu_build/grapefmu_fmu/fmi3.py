@@ -8,10 +8,8 @@ from pythonfmu3 import Boolean, Fmi3Causality, Fmi3Initial, Fmi3Slave, Fmi3Statu
 from pythonfmu3.fmi3slave import Fmi3StepResult
 from pythonfmu3.unit import Unit
 
-from .common import GrapeSlaveMixin
+from .common import GrapeSlaveMixin, kinds
 from .units import BASE_UNITS
-
-TYPES = {"real": Float64, "integer": Int32, "boolean": Boolean}
 
 
 class _UnitWithoutBase(Unit):
@@ -22,6 +20,10 @@ class _UnitWithoutBase(Unit):
 
 
 class GrapeFmi3Slave(GrapeSlaveMixin, Fmi3Slave):
+    TYPES = {"real": Float64, "integer": Int32, "boolean": Boolean}
+    KINDS = kinds(Fmi3Causality, Fmi3Variability, Fmi3Initial)
+    UNITS = True
+
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self._setup(kwargs)
@@ -34,20 +36,6 @@ class GrapeFmi3Slave(GrapeSlaveMixin, Fmi3Slave):
                                        description="Simulation time"))
         for var in self.core.vars:
             self._register(var)
-
-    def _register(self, var):
-        kw = {"description": var.description, **self._accessors(var.name)}
-        if var.type == "real" and var.unit not in ("", "1"):
-            kw["unit"] = var.unit
-        cont = Fmi3Variability.continuous if var.type == "real" else Fmi3Variability.discrete
-        if var.causality == "input":
-            kw.update(causality=Fmi3Causality.input, variability=cont)
-        elif var.causality == "output":
-            kw.update(causality=Fmi3Causality.output, variability=cont, initial=Fmi3Initial.exact)
-        else:
-            kw.update(causality=Fmi3Causality.parameter, variability=Fmi3Variability.fixed,
-                      initial=Fmi3Initial.exact)
-        self.register_variable(TYPES[var.type](var.name, **kw))
 
     def enter_initialization_mode(self):
         pass

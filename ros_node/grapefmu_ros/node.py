@@ -75,6 +75,7 @@ class SimulatorNode(Node):
         m = self.scene.model
         self.names = m.names
         self.joints = m.dof_names  # joint_state() names them twig_<angle>
+        self.pairs = [(p.i, p.j) for p in m.pairs]
         self.pair_topics = [f"contact/{m.pair_name(p)}/wrench" for p in range(len(m.pairs))] if T.per_pair_topics(m) else []
         self.recorder = McapRecorder(gp("record"), metadata(self.scene, self.mode, self.rate)) if gp("record") else None
         self.pub_js = self.create_publisher(JointState, "joint_states", STATE_QOS)
@@ -160,14 +161,15 @@ class SimulatorNode(Node):
         tension = self._obs[2 * d: o]
         self.emit(self.pub_tension, "pedicel_tension", M.tension(t, self.names, tension), t)
         forces, pen, touching = self._obs[o: o + npair], self._obs[o + npair: o + 2 * npair], S.mode != 0
-        base = S.y[s.layout.base]
-        centres(S.y, s.M, self._pos)
-        origin = np.array([base[0], 0.0, base[1]])
-        hinges = b[:, [3, 6, 7]] + origin
-        berries = self._pos + origin
-        pairs = [(p.i, p.j) for p in model.pairs]
+        rate = self.get_parameter("marker_rate_hz").value
+        markers_due = rate > 0 and t - self._last_marker >= 1.0 / rate - 1e-12
+        if self.pair_topics or markers_due:  # berry positions: only for wrench directions and markers
+            base = S.y[s.layout.base]
+            centres(S.y, s.M, self._pos)
+            origin = np.array([base[0], 0.0, base[1]])
+            berries = self._pos + origin
         for p, topic in enumerate(self.pair_topics):
-            i, j = pairs[p]
+            i, j = self.pairs[p]
             dv = berries[j] - berries[i]
             self.emit(self.pub_wrench[p], topic, M.wrench(t, forces[p] * dv / max(np.linalg.norm(dv), 1e-12)), t)
         self.emit(self.pub_contacts, "contacts", M.labelled(list(T.CONTACT_FIELDS), T.contact_values(forces, pen, touching),
@@ -175,10 +177,10 @@ class SimulatorNode(Node):
         peak_f, peak_t, dissipated = self._obs[o + 3 * npair: o + 3 * npair + 3]
         self.emit(self.pub_summary, "summary", M.labelled(list(T.SUMMARY_FIELDS), T.summary_values(
             t, forces, tension, peak_f, peak_t, dissipated, touching)), t)
-        rate = self.get_parameter("marker_rate_hz").value
-        if rate > 0 and t - self._last_marker >= 1.0 / rate - 1e-12:
+        if markers_due:
             self._last_marker = t
-            self.emit(self.pub_markers, "markers", M.markers(t, origin, hinges, berries, b[:, 1], pairs, forces), t)
+            self.emit(self.pub_markers, "markers",
+                      M.markers(t, origin, b[:, [3, 6, 7]] + origin, berries, b[:, 1], self.pairs, forces), t)
         if self.pub_clock is not None:
             self.emit(self.pub_clock, "/clock", Clock(clock=M.stamp(t)), t)
 

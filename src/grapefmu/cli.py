@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from importlib import resources
@@ -124,9 +123,6 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     out = Path(a.output) if a.output else Path(a.spec).with_suffix(".parquet")
     if a.workers is not None and not 1 <= a.workers <= 1024:
         raise GrapefmuError(f"--workers: expected an integer in [1, 1024], got {a.workers}")
-    n = len(spec.runs())
-    where = f"Dask scheduler {a.scheduler}" if a.scheduler else f"{a.workers or os.cpu_count()} local processes"
-    print(f"sweep: {n} runs ({spec.mode}) of {spec.base.get('name', 'scene')} on {where}", file=sys.stderr)
     run_sweep(spec, out, workers=a.workers, scheduler=a.scheduler)
     print(f"wrote {out}")
     return 0

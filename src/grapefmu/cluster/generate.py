@@ -15,7 +15,7 @@ pendulums when the pitch equals the diameter).
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -180,6 +180,3 @@ def row_scene(spec: RowSpec) -> dict[str, Any]:
     return {"name": spec.name, "gravity": 9.81, "berries": berries, "contact": dict(spec.contact),
             "excitation": dict(spec.excitation), "solver": dict(spec.solver)}
 
-
-def spec_dict(spec: ClusterSpec | RowSpec) -> dict[str, Any]:
-    return asdict(spec)

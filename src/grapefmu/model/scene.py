@@ -65,12 +65,8 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     gravity = v.number("gravity", doc.get("gravity", 9.81), 0.0, 100.0, unit="m/s²")
     berries, angles, rates = _berries(doc.get("berries"))
     names = [b.name for b in berries]
-    pairs = _contact(doc.get("contact"), berries) if "contact" in doc else ()
+    pairs, pruned = _contact(doc.get("contact"), berries) if "contact" in doc else ((), 0)
     couplings = _coupling(doc["coupling"], berries) if "coupling" in doc else ()
-    listed = len(doc["contact"].get("pairs", ())) if isinstance(doc.get("contact"), dict) and "pairs" in doc["contact"] \
-        else len(berries) * (len(berries) - 1) // 2
-    pairs, _ = _reachable(pairs, berries)
-    pruned = listed - len(pairs) if "contact" in doc else 0
     model = Model(tuple(berries), tuple(pairs), tuple(couplings), gravity, pruned)
     solver = _solver(doc.get("solver", {}))
     excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)
@@ -139,11 +135,10 @@ def _angles(key: str, raw: Any, nd: int, bound: float, unit: str) -> tuple[float
     return v.vector(key, raw, 2, -bound, bound, unit)
 
 
-def _reachable(pairs: list[ContactPair], berries: list[Berry]) -> tuple[list[ContactPair], int]:
-    """Drop pairs that can never touch: the rachis is rigid, so hinges keep their distance, and
+def _within_reach(a: Berry, b: Berry) -> bool:
+    """Whether two berries can ever touch: the rachis is rigid, so hinges keep their distance, and
     berries farther apart than l_i + l_j + r_i + r_j at the hinges never meet."""
-    keep = [pr for pr in pairs if _hinge_distance(berries[pr.i], berries[pr.j]) <= _reach(berries[pr.i]) + _reach(berries[pr.j])]
-    return keep, len(pairs) - len(keep)
+    return _hinge_distance(a, b) <= _reach(a) + _reach(b)
 
 
 def _reach(b: Berry) -> float:
@@ -163,7 +158,7 @@ def _all_pairs(berries: list[Berry]) -> list[tuple[int, int]]:
         for j in order[a + 1:]:
             if berries[j].hinge_x - berries[i].hinge_x > reach:
                 break
-            if _hinge_distance(berries[i], berries[j]) <= _reach(berries[i]) + _reach(berries[j]):
+            if _within_reach(berries[i], berries[j]):
                 out.append((min(i, j), max(i, j)))
     return sorted(out)
 
@@ -191,7 +186,8 @@ def _pair_list(key: str, raw: Any, berries: list[Berry], default: list[tuple[int
     return out
 
 
-def _contact(raw: Any, berries: list[Berry]) -> list[ContactPair]:
+def _contact(raw: Any, berries: list[Berry]) -> tuple[list[ContactPair], int]:
+    """The contact pairs (only those that can ever touch) and how many listed or possible pairs were left out."""
     key = "contact"
     v.table(key, raw)
     v.no_unknown_keys(key, raw, CONTACT_KEYS)
@@ -209,9 +205,11 @@ def _contact(raw: Any, berries: list[Berry]) -> list[ContactPair]:
         raise SceneError(f"{key}.{'damping' if 'damping' in raw else 'restitution'}",
                          "the hertz law is elastic; use hunt-crossley for a damped Hertz contact")
     e = v.number(f"{key}.restitution", raw["restitution"], 0.0, 1.0, lo_open=True) if "restitution" in raw else None
-    all_pairs = _all_pairs(berries)
+    listed = _pair_list(f"{key}.pairs", raw.get("pairs"), berries, _all_pairs(berries))
+    kept = [(i, j) for i, j in listed if _within_reach(berries[i], berries[j])]
+    possible = len(listed) if raw.get("pairs") is not None else len(berries) * (len(berries) - 1) // 2
     pairs = []
-    for i, j in _pair_list(f"{key}.pairs", raw.get("pairs"), berries, all_pairs):
+    for i, j in kept:
         bi, bj = berries[i], berries[j]
         if law == "kelvin-voigt":
             k = v.number(f"{key}.stiffness", raw.get("stiffness", 2000.0), 0.0, 1e9, lo_open=True, unit="N/m")
@@ -231,7 +229,7 @@ def _contact(raw: Any, berries: list[Berry]) -> list[ContactPair]:
             else:
                 c = v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e3, unit="(χ, dimensionless)")
         pairs.append(ContactPair(i, j, ContactLaw(law, k, c, clamp, e)))
-    return pairs
+    return pairs, possible - len(kept)
 
 
 def _coupling(raw: Any, berries: list[Berry]) -> list[Coupling]:

@@ -68,8 +68,8 @@ def write_mcap(run: Run, path: str | Path) -> None:
     berry_joints = [f"twig_{n}" for n in m.names]
     q, w = run.angles, run.angular_velocities
     effort = hinge_effort(m, q, w)
-    pos = run.positions
     wrenches = per_pair_topics(m)
+    pos = run.positions if wrenches else None
     in_contact = run.mode != 0
     e = run.energy
     dissipated = e["dissipated_hinge"] + e["dissipated_coupling"] + e["dissipated_contact"]

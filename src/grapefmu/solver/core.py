@@ -637,7 +637,7 @@ def integrate(M, X, TB, S, cfg, B, t_target, max_steps):
             # rebuild early, from where the step ended, so the list stays valid for the next steps
             centres(S.y, M, pos[0])
             rebuild_near(S, M, pos[0], cfg[SKIN])
-            changed = True  # smooth flags may have changed
+            changed = changed or cfg[STEP_CONTROL] > 0.5  # only step control ties smooth flags to the list
         if changed or event or (bi < nbreak and t_commit >= X.breaks[bi]):
             rhs(t_commit, t_commit, S.y, S.f, S.mode, S.v_onset, S.smooth, M, X.kind, X.par, X.table)
             S.it[N_RHS] += 1

@@ -30,6 +30,8 @@ def run_sweep(spec: SweepSpec, output: str | Path, *, workers: int | None = None
         return output
     done = _read_journal(journal, spec.fingerprint)
     todo = [k for k in range(len(runs)) if k not in done]
+    where = f"Dask scheduler {scheduler}" if scheduler else f"{workers or os.cpu_count()} local processes"
+    _say(progress, f"sweep: {len(runs)} runs ({spec.mode}) of {spec.base.get('name', 'scene')} on {where}")
     if done:
         _say(progress, f"sweep: resuming, {len(done)} of {len(runs)} runs already done")
     # (re)write the journal with only complete rows, so a line torn by a kill is not appended to
@@ -56,27 +58,42 @@ def _execute(spec: SweepSpec, runs: list[dict], todo: list[int], workers: int | 
     base_dir = str(spec.base_dir)
     if scheduler:
         try:
-            from distributed import Client, as_completed
+            from distributed import Client, wait
         except ImportError as e:
             raise GrapefmuError(f"--scheduler needs Dask distributed (pip install 'grapefmu[dask]'): {e}") from None
         with Client(scheduler) as client:
-            futures = [client.submit(run_one, k, scene_doc(spec, runs[k]), base_dir, key=f"grapefmu-run-{spec.fingerprint}-{k}",
-                                     pure=False) for k in todo]
-            for fut in as_completed(futures):
-                yield fut.result()
+            submit = lambda k: client.submit(run_one, k, scene_doc(spec, runs[k]), base_dir,  # noqa: E731
+                                             key=f"grapefmu-run-{spec.fingerprint}-{k}", pure=False)
+            window = 4 * max(sum(client.nthreads().values()), 1)
+            yield from _windowed(submit, todo, window, lambda fs: wait(fs, return_when="FIRST_COMPLETED"))
         return
-    from concurrent.futures import ProcessPoolExecutor, as_completed
     import multiprocessing as mp
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor
+    from concurrent.futures import wait as wait_local
 
-    with ProcessPoolExecutor(max_workers=workers or os.cpu_count(), mp_context=mp.get_context("spawn")) as pool:
-        futures = [pool.submit(run_one, k, scene_doc(spec, runs[k]), base_dir) for k in todo]
-        try:
-            for fut in as_completed(futures):
+    n = workers or os.cpu_count() or 1
+    with ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn")) as pool:
+        submit = lambda k: pool.submit(run_one, k, scene_doc(spec, runs[k]), base_dir)  # noqa: E731
+        yield from _windowed(submit, todo, 4 * n, lambda fs: wait_local(fs, return_when=FIRST_COMPLETED))
+
+
+def _windowed(submit, todo: list[int], window: int, wait_first) -> Iterator[dict[str, Any]]:
+    """Keep at most `window` runs in flight: a sweep of a million runs never holds a million scene
+    documents at once, and an interruption leaves little work to cancel."""
+    queue = iter(todo)
+    pending = {submit(k) for _, k in zip(range(window), queue)}
+    try:
+        while pending:
+            done, pending = wait_first(pending)
+            pending = set(pending)
+            for fut in done:
                 yield fut.result()
-        except BaseException:
-            for f in futures:
-                f.cancel()
-            raise
+                k = next(queue, None)
+                if k is not None:
+                    pending.add(submit(k))
+    finally:
+        for fut in pending:
+            fut.cancel()
 
 
 def _read_journal(journal: Path, fingerprint: str) -> dict[int, dict]:

@@ -18,7 +18,6 @@ from __future__ import annotations
 import copy
 import hashlib
 import itertools
-import json
 import re
 import tomllib
 from dataclasses import dataclass
@@ -182,6 +181,3 @@ def scene_doc(spec: SweepSpec, inputs: dict[str, Any]) -> dict:
         apply(doc, key, value)
     return doc
 
-
-def canonical(inputs: dict[str, Any]) -> str:
-    return json.dumps(inputs, sort_keys=True)
