@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from grapefmu.model.scene import scene_from_dict
+from grapefmu.scenefile import scene_from_dict
 
 KYOHO = {"mass": 0.011, "radius": 0.0135, "twig_length": 0.03, "hinge_stiffness": 1e-3, "hinge_damping": 2e-5}
 

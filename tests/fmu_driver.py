@@ -17,8 +17,8 @@ import sys
 
 import numpy as np
 
-OUTPUTS = ["angle_left", "angle_right", "angular_velocity_left", "angular_velocity_right", "contact_force",
-           "pedicel_force_left", "pedicel_force_right", "peak_contact_force", "dissipated_energy"]
+OUTPUTS = ["angle_left", "angle_right", "angular_velocity_left", "angular_velocity_right", "contact_force_left_right",
+           "pedicel_tension_left", "pedicel_tension_right", "peak_contact_force", "dissipated_energy"]
 
 
 def signal(path):
@@ -89,7 +89,7 @@ def run_fmpy(path, rows, stop, dt, params=None):
     return {"t_y": out, "collision_count": count}
 
 
-SUMMARY_REALS = ["peak_contact_force", "dissipated_energy", "max_contact_force", "max_pedicel_force"]
+SUMMARY_REALS = ["peak_contact_force", "dissipated_energy", "max_contact_force", "max_pedicel_tension"]
 SUMMARY_INTS = ["collision_count", "active_pairs", "berries_over_detachment_force", "bruising_impacts"]
 
 

@@ -11,8 +11,8 @@ import pytest
 from grapefmu.cluster import ClusterSpec, RowSpec, cluster_scene, row_scene
 from grapefmu.errors import SceneError
 from grapefmu.model import ContactPair, Model
-from grapefmu.model.scene import load_scene, scene_from_dict
-from grapefmu.physics.dynamics import centres
+from grapefmu.scenefile import load_scene, scene_from_dict
+from grapefmu.physics.kinematics import positions
 from grapefmu.solver.api import simulate
 from grapefmu.solver.components import groups, sub_scene
 from grapefmu.solver.solver import Solver
@@ -32,8 +32,8 @@ def test_generated_cluster_is_at_rest_without_overlap_and_reproducible():
     assert doc != cluster_scene(ClusterSpec(berries=40, seed=6))
     sc = scene_from_dict({**doc, "excitation": {"kind": "none"}, "solver": {"t_end": 0.2, "rtol": 1e-9}}, Path.cwd())
     pos = np.zeros((40, 3))
-    centres(sc.initial_state, sc.model.arrays, pos)
-    r = sc.model.arrays.berry[:, 1]
+    positions(sc.initial_state, sc.model.arrays, pos)
+    r = sc.model.arrays.berry["radius"]
     gaps = [np.linalg.norm(pos[i] - pos[j]) - r[i] - r[j] for i in range(40) for j in range(i)]
     assert min(gaps) >= -1e-12
     run = simulate(sc)
@@ -89,7 +89,7 @@ def test_berries_that_cannot_touch_give_exactly_the_single_pendulum():
     for i in range(12):
         alone = simulate(sub_scene(sc, [i]))
         np.testing.assert_array_equal(run.angles[:, 2 * i: 2 * i + 2], alone.angles)
-        np.testing.assert_array_equal(run.pedicel_force[:, i], alone.pedicel_force[:, 0])
+        np.testing.assert_array_equal(run.pedicel_tension[:, i], alone.pedicel_tension[:, 0])
     assert run.ledger_error() < 1e-7
 
 
@@ -134,7 +134,7 @@ def test_newtons_cradle_conserves_momentum_and_energy_in_the_elastic_limit():
     total = e["kinetic"] + e["gravity"] + e["contact_elastic"]
     assert np.abs(total - total[0]).max() < 1e-7 * total[0]
     b = sc.model.arrays.berry
-    px = (b[:, 0] * b[:, 2] * np.cos(run.angles) * run.angular_velocities).sum(axis=1)
+    px = (b["mass"] * b["twig_length"] * np.cos(run.angles) * run.angular_velocities).sum(axis=1)
     first = run.impacts.onset.min()
     train = run.impacts.onset < first + 0.02  # the first collision train, before anything swings back
     last = run.impacts.end[train].max()

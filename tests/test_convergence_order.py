@@ -4,15 +4,13 @@ from __future__ import annotations
 import numpy as np
 
 from grapefmu import simulate
-from grapefmu.solver import core
 from grapefmu.solver.solver import Solver
 
 from .conftest import dual, scene
 
 
 def _final_error(sc, ref, h, locate):
-    s = Solver(sc, fixed_step=h)
-    s.cfg[core.LOCATE] = 1.0 if locate else 0.0
+    s = Solver(sc, fixed_step=h, locate=locate)
     s.advance(0.4)
     return np.abs(s.angles - ref).max()
 

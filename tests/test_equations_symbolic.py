@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from grapefmu.physics.dynamics import rhs
+from grapefmu.physics.dynamics import derivative
+from grapefmu.physics.forces import CONTACT
 from grapefmu.physics.layout import layout
 from grapefmu.solver.solver import Solver
 
@@ -19,6 +20,13 @@ from grapefmu.model import Berry, ContactLaw, ContactPair, Coupling, Model, Scen
 
 t = sp.symbols("t")
 q1, q2 = (sp.Function("q1")(t), sp.Function("q2")(t))
+
+
+def loaded(n_pairs: int, v_onset: float = 0.7) -> np.ndarray:
+    """Every pair in mode 1 (loaded) with the given onset speed."""
+    c = np.zeros(n_pairs, dtype=CONTACT)
+    c["mode"], c["v_onset"] = 1, v_onset
+    return c
 
 
 def lagrange_accelerations(law: str):
@@ -96,19 +104,12 @@ def test_compiled_rhs_matches_lagrange_equations(law):
                         for i, nm in enumerate(("left", "right")))
         sc = Scene(Model(berries, (ContactPair(0, 1, law_obj),), (Coupling(0, 1, 3.0, 0.02),), 9.81),
                    tuple(q), tuple(w))
-        sol = Solver(sc)
-        S = sol.state
-        S.mode[:] = 1
+        y = Solver(sc).y
         ax, ay = rng.uniform(-5, 5, 2)
-        from grapefmu.model.excitation import constant
-        X = constant(ax, ay).arrays
-        S.v_onset[:] = 0.7
-        dyv = np.zeros_like(S.y)
-        rhs(0.0, 0.0, S.y, dyv, S.mode, S.v_onset, S.smooth, sol.M, X.kind, X.par, X.table)
-        bb = sc.model.arrays.berry
-        pp = sc.model.arrays.pair_par[0]
-        args = (bb[0, 0], bb[1, 0], bb[0, 2], bb[1, 2], bb[0, 3], bb[1, 3], bb[0, 1], bb[1, 1], bb[0, 4], bb[1, 4],
-                bb[0, 5], bb[1, 5], 9.81, ax, ay, pp[0], pp[1], 3.0, 0.02, 0.7, q[0], q[1], w[0], w[1])
+        dyv = derivative(sc.model.arrays, y, loaded(1), (ax, ay))
+        bb, pp = sc.model.arrays.berry, sc.model.arrays.pair[0]
+        args = (*bb["mass"], *bb["twig_length"], *bb["hinge_x"], *bb["radius"], *bb["hinge_stiffness"],
+                *bb["hinge_damping"], 9.81, ax, ay, pp["stiffness"], pp["damping"], 3.0, 0.02, 0.7, q[0], q[1], w[0], w[1])
         expect = [float(v) for v in f(*[mpmath.mpf(float(a)) for a in args])]
         lay = layout(2, 2, 1)
         got = dyv[lay.w]
@@ -123,29 +124,37 @@ def test_pedicel_tension_balances_radial_forces():
     berries = (Berry("left", 0.011, 0.0135, 0.03, -0.013, 1e-3, 2e-5), Berry("right", 0.012, 0.014, 0.035, 0.013, 1e-3, 2e-5))
     sc = Scene(Model(berries, (ContactPair(0, 1, ContactLaw("kelvin-voigt", 2000.0, 1.4)),),
                      (Coupling(0, 1, 2.0, 0.01),)), (0.12, -0.1), (0.0, 0.0))
-    from grapefmu.model.excitation import constant
-    from grapefmu.physics.dynamics import berry_forces, pedicel_tension
     sol = Solver(sc)
-    S = sol.state
-    S.y[2:4] = [1.2, -0.7]
-    S.mode[:] = 1
+    y = sol.y
+    y[2:4] = [1.2, -0.7]
     ax, ay = 1.5, -2.0
-    X = constant(ax, ay).arrays
-    dyv = np.zeros_like(S.y)
-    rhs(0.0, 0.0, S.y, dyv, S.mode, S.v_onset, S.smooth, sol.M, X.kind, X.par, X.table)
-    fext = np.zeros((2, 3))
-    berry_forces(S.y, S.mode, S.v_onset, S.smooth, sol.M, np.zeros(1), np.zeros(1), fext)
+    contacts = loaded(1, 0.1)
+    dyv = derivative(sc.model.arrays, y, contacts, (ax, ay))
+    out = observe_one(sc, y, contacts, (ax, ay))
+    # the forces the berries exert on each other, from the observation's contact force and normal and the
+    # coupling (k3, c3 on the change of horizontal separation s): +F n on the pair's second berry
+    fn = out.contact_force[0, 0] * out.contact_normal[0, 0]
+    sep = 0.035 * math.sin(y[1]) - 0.03 * math.sin(y[0])
+    sep_dot = 0.035 * math.cos(y[1]) * y[3] - 0.03 * math.cos(y[0]) * y[2]
+    fc = 2.0 * sep + 0.01 * sep_dot
+    fext = np.array([-fn + [fc, 0, 0], fn - [fc, 0, 0]])
     assert np.abs(fext).max() > 0.01  # the berries really push on each other here
-    tens = np.zeros(2)
-    pedicel_tension(S.y, ax, ay, fext, sol.M, tens)
-    b = sc.model.arrays.berry
-    for i in range(2):
-        m, length = b[i, 0], b[i, 2]
-        q, w, a = S.y[i], S.y[2 + i], dyv[2 + i]
+    tens = out.pedicel_tension[0]
+    for i, b in enumerate(berries):
+        m, length = b.mass, b.twig_length
+        q, w, a = y[i], y[2 + i], dyv[2 + i]
         acc = length * np.array([a * math.cos(q) - w * w * math.sin(q), a * math.sin(q) + w * w * math.cos(q)])
         er = np.array([math.sin(q), -math.cos(q)])
         expected = -m * acc @ er + m * (np.array([-ax, -9.81 - ay]) @ er) + fext[i, [0, 2]] @ er
         assert tens[i] == pytest.approx(expected, rel=1e-12)
+
+
+def observe_one(sc, y, contacts, accel):
+    from grapefmu.physics import observe as obs
+    m = sc.model
+    out = obs.empty(1, m.n_berries, m.n_dof, len(m.pairs))
+    obs.observe(y[None, :], contacts[None, :], np.array([accel]), m.arrays, out)
+    return out
 
 
 def spherical_lagrange(law: str):
@@ -195,7 +204,6 @@ def spherical_lagrange(law: str):
 def test_compiled_rhs_matches_lagrange_equations_spherical(law):
     import mpmath
 
-    from grapefmu.model.excitation import constant
 
     mpmath.mp.dps = 30
     f = spherical_lagrange(law)
@@ -211,22 +219,16 @@ def test_compiled_rhs_matches_lagrange_equations_spherical(law):
         probe = Model((*berries, Berry("b", m[1], r[1], length[1], 0.0, kh[1], ch[1], 0.0, 0.0, True, psi[1],
                                        tuple(rest[1]))))
         # put the second hinge where the berries overlap by 0.3 mm along a random direction
-        from grapefmu.physics.dynamics import centres
+        from grapefmu.physics.kinematics import positions
         pos = np.zeros((2, 3))
-        centres(np.r_[x, w], probe.arrays, pos)
+        positions(np.r_[x, w], probe.arrays, pos)
         n = rng.normal(size=3)
         n /= np.linalg.norm(n)
         h2 = pos[0] + (r.sum() - 3e-4) * n - (pos[1] - 0.0)
         berries.append(Berry("b", m[1], r[1], length[1], h2[0], kh[1], ch[1], h2[1], h2[2], True, psi[1], tuple(rest[1])))
         sc = Scene(Model(tuple(berries), (ContactPair(0, 1, law_obj),)), tuple(x), tuple(w))
-        sol = Solver(sc)
-        S = sol.state
-        S.mode[:] = 1
-        S.v_onset[:] = 0.7
         ax, az = rng.uniform(-5, 5, 2)
-        X = constant(ax, az).arrays
-        dyv = np.zeros_like(S.y)
-        rhs(0.0, 0.0, S.y, dyv, S.mode, S.v_onset, S.smooth, sol.M, X.kind, X.par, X.table)
+        dyv = derivative(sc.model.arrays, Solver(sc).y, loaded(1), (ax, az))
         args = (m[0], m[1], length[0], length[1], r[0], r[1], kh[0], kh[1], ch[0], ch[1], 9.81, ax, az,
                 law_obj.stiffness, law_obj.damping, 0.7, *h1, *h2, *psi, *rest[0], *rest[1], *x, *w)
         expect = f(*[mpmath.mpf(float(v)) for v in args])

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from grapefmu import simulate
+from grapefmu.physics.excitation import accel
 from grapefmu.cli import default_scene_path
 from grapefmu.model.excitation import pick_and_place
-from grapefmu.model.scene import scene_from_dict
+from grapefmu.scenefile import scene_from_dict
 
 pytest.importorskip("fmpy")
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,7 +42,7 @@ def fmus(tmp_path_factory):
     # a pick-and-place acceleration, sampled every 10 ms and held (what a controller sends)
     t = np.round(np.arange(0, STOP + 1e-9, 1e-2), 10)
     ex = pick_and_place([((0.0, 0.1), 0.3), ((0.3, 0.0), 0.5), ((0.0, -0.1), 0.3)], start=0.05)
-    np.savetxt(d / "signal.csv", np.column_stack([t, ex.accel(t)]), delimiter=",", header="time,ax,ay", comments="")
+    np.savetxt(d / "signal.csv", np.column_stack([t, accel(ex, t)]), delimiter=",", header="time,ax,az", comments="")
     return d
 
 
@@ -75,7 +76,7 @@ def test_description_units_version_and_capabilities(fmus):
     with zipfile.ZipFile(fmus / "default2.fmu") as z:
         root = ET.fromstring(z.read("modelDescription.xml"))
     reals = {sv.get("name"): sv.find("Real") for sv in root.iter("ScalarVariable") if sv.find("Real") is not None}
-    assert reals["angle_left"].get("unit") == "rad" and reals["contact_force"].get("unit") == "N"
+    assert reals["angle_left"].get("unit") == "rad" and reals["contact_force_left_right"].get("unit") == "N"
     assert all(r.get("unit") for n, r in reals.items() if n not in ("restitution", "rtol"))
     assert all(sv.get("description") for sv in root.iter("ScalarVariable"))
 
@@ -196,5 +197,5 @@ def test_cluster_fmu_has_summary_outputs_that_match_the_core(fmus):
     assert rows[-1, 2] == pytest.approx(ref.energy["dissipated_hinge"][-1] + ref.energy["dissipated_contact"][-1],
                                         rel=1e-5)
     np.testing.assert_allclose(rows[:, 3], ref.contact_force[1:].max(axis=1), atol=1e-4)
-    np.testing.assert_allclose(rows[:, 4], ref.pedicel_force[1:].max(axis=1), atol=1e-4)
+    np.testing.assert_allclose(rows[:, 4], ref.pedicel_tension[1:].max(axis=1), atol=1e-4)
     np.testing.assert_array_equal(rows[:, 6], ref.active_pairs[1:])

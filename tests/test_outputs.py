@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from grapefmu import simulate
-from grapefmu.results.writers import write_run
+from grapefmu.recording.messages import IMPACT_FIELDS
+from grapefmu.write import write_run
 
 from .conftest import dual, scene
-
+from .recordings import decode_everything
 
 @pytest.fixture(scope="module")
 def run():
@@ -24,7 +25,7 @@ def test_csv_has_the_named_columns_and_values(run, tmp_path):
     path = tmp_path / "run.csv"
     write_run(run, path)
     data = np.genfromtxt(path, delimiter=",", names=True)
-    for col in ("time", "angle_left", "angle_right", "angular_velocity_left", "pedicel_force_right",
+    for col in ("time", "angle_left", "angle_right", "angular_velocity_left", "pedicel_tension_right",
                 "contact_force_left_right", "penetration_left_right"):
         assert col in data.dtype.names
     np.testing.assert_allclose(data["angle_right"], run.angles[:, 1], rtol=1e-11, atol=1e-14)
@@ -51,12 +52,13 @@ def test_mcap_reads_back_in_rosbags_and_mcap_ros2(run, tmp_path):
     with AnyReader([path]) as r:
         counts = {c.topic: c.msgcount for c in r.connections}
         assert counts["joint_states"] == len(run.t)
-        assert counts["collision_events"] == run.collision_count
+        assert counts["collision_events"] == len(run.impacts)
         js = [c for c in r.connections if c.topic == "joint_states"]
         positions = np.array([r.deserialize(raw, c.msgtype).position for c, _, raw in r.messages(connections=js)])
         np.testing.assert_array_equal(positions, run.angles)
         ev = [c for c in r.connections if c.topic == "collision_events"]
-        peaks = [r.deserialize(raw, c.msgtype).data[6] for c, _, raw in r.messages(connections=ev)]
+        fields = IMPACT_FIELDS.index("peak_force")
+        peaks = [r.deserialize(raw, c.msgtype).data[fields] for c, _, raw in r.messages(connections=ev)]
         np.testing.assert_allclose(sorted(peaks), sorted(run.impacts.peak_force))
     with open(path, "rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
@@ -64,6 +66,8 @@ def test_mcap_reads_back_in_rosbags_and_mcap_ros2(run, tmp_path):
         assert tomllib.loads(meta["grapefmu"]["scene_toml"])["berries"][0]["name"] == "left"
         efforts = [m.effort for _, _, _, m in reader.iter_decoded_messages(topics=["joint_states"])]
         assert len(efforts) == len(run.t) and all(len(e) == 2 for e in efforts)
+    counts = decode_everything(path)
+    assert counts["joint_states"] == counts["pedicel_tension"] == counts["summary"] == len(run.t)
 
 
 def test_main_command_writes_plot_and_mcap(tmp_path):
@@ -78,12 +82,9 @@ def test_main_command_writes_plot_and_mcap(tmp_path):
 
 @pytest.mark.parametrize("name", ["open_loop", "gentle"])
 def test_example_recordings_read_back_and_replay_exactly(name):
-    from rosbags.highlevel import AnyReader
-
     from grapefmu.recording.replay import check
     path = Path(__file__).resolve().parents[1] / "recordings" / f"{name}.mcap"
-    with AnyReader([path]) as r:
-        topics = {c.topic: c.msgcount for c in r.connections}
+    topics = decode_everything(path)
     assert topics["joint_states"] > 2000 and "collision_events" in topics and "rachis/accel_applied" in topics
     res = check(path)
     assert res.truncated is None and res.compared >= 2000 and res.max_deviation == 0.0

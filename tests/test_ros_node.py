@@ -28,6 +28,8 @@ from grapefmu.cli import default_scene_path  # noqa: E402
 from grapefmu.recording.replay import check, read_recording  # noqa: E402
 from grapefmu.recording.stamps import stamp_seconds  # noqa: E402
 
+from .recordings import decode_everything  # noqa: E402
+
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 DOMAIN = str(random.randint(1, 50))  # ≤ 101: higher domains put DDS ports in Linux's ephemeral range
 DDS = {"ROS_DOMAIN_ID": DOMAIN, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
@@ -225,6 +227,7 @@ def test_killed_node_leaves_a_readable_file_up_to_its_last_chunk(ros, tmp_path):
 
 
 def test_recordings_read_the_same_in_rosbags_and_mcap_ros2(ros, tmp_path):
+    """Every message of every topic of a node recording decodes in rosbags and mcap-ros2-support."""
     from rosbags.highlevel import AnyReader
     rows = signal_rows(40)
     with sim_node(tmp_path) as (proc, rec):
@@ -233,6 +236,8 @@ def test_recordings_read_the_same_in_rosbags_and_mcap_ros2(ros, tmp_path):
         drive(ctl, rows)
         ctl.close()
     mine = read_recording(rec)
+    counts = decode_everything(rec)
+    assert counts["pedicel_tension"] == counts["joint_states"] == counts["summary"] == counts["contacts"] > 40
     with AnyReader([Path(rec)]) as reader:
         topics = {c.topic for c in reader.connections}
         assert {"joint_states", "pedicel_tension", "contact/left_right/wrench", "rachis/accel",
@@ -250,24 +255,6 @@ def test_recordings_read_the_same_in_rosbags_and_mcap_ros2(ros, tmp_path):
                     assert a.accel.linear.x == b.accel.linear.x
                 else:
                     assert a.wrench.force.x == b.wrench.force.x
-
-
-def test_hand_written_schemas_match_the_installed_definitions():
-    """The simulate writer's ros2msg texts (no ROS needed) against the installed .msg files."""
-    from grapefmu.recording.msgdefs import MSGDEFS
-    from grapefmu_ros.msgdefs import full_definition
-
-    def fields(text):
-        out = []
-        for block in text.split("=" * 80):
-            for line in block.splitlines():
-                line = line.split("#", 1)[0].strip()
-                if line and not line.startswith("MSG:") and "=" not in line:
-                    typ, name = line.split()[:2]
-                    out.append(f"{typ.split('/')[-1]} {name}")  # .msg files omit their own package
-        return sorted(set(out))
-    for dtype, text in MSGDEFS.items():
-        assert fields(text) == fields(full_definition(dtype)), dtype
 
 
 LISTENER = """
@@ -294,7 +281,7 @@ def test_replay_publish_republishes_the_recorded_topics(tmp_path):
     """`grapefmu replay --publish` of a simulate recording, received by a listener in another process."""
     import json
     from grapefmu import simulate
-    from grapefmu.results.writers import write_run
+    from grapefmu.write import write_run
     run = simulate(load_scene(default_scene_path()), 0.2)
     rec = tmp_path / "sim.mcap"
     write_run(run, rec)
@@ -321,7 +308,8 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
     from visualization_msgs.msg import MarkerArray
 
     from grapefmu.cli import main as cli
-    from grapefmu.recording.topics import CONTACT_FIELDS, SUMMARY_FIELDS
+    from grapefmu.recording.messages import CONTACT_FIELDS, SUMMARY_FIELDS
+    from grapefmu.results.catalogue import channel
 
     scene = tmp_path / "cluster.toml"
     assert cli(["cluster", "--berries", "30", "--seed", "2", "-o", str(scene)]) == 0
@@ -348,7 +336,8 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
     assert fields == list(SUMMARY_FIELDS)
     final = [s for s in summaries if s.data[0] == pytest.approx(t_last, abs=1e-12)][-1]
     assert final.data[fields.index("active_pairs")] == np.count_nonzero(solver.modes)
-    assert final.data[fields.index("peak_contact_force_n")] == solver.state.peak_force.max()
+    assert final.data[fields.index("peak_contact_force")] == channel("peak_contact_force").value(solver.snapshot())[0]
+    assert final.data[fields.index("collision_count")] == solver.totals()["collision_count"][0] > 0
     assert max(s.data[fields.index("active_pairs")] for s in summaries) > 0
     busy = [c for c in contacts if c.data]
     assert busy and busy[0].layout.dim[0].label == ",".join(CONTACT_FIELDS)
@@ -356,3 +345,4 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
     spheres = [m for m in markers[-1].markers if m.ns == "berries"]
     assert len(spheres) == 30 and len({round(m.pose.position.z, 6) for m in spheres}) > 10
     assert check(rec).max_deviation == 0.0
+    assert decode_everything(rec)["summary"] == len(summaries)

@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from grapefmu import SceneError
-from grapefmu.model import parse_scene
+from grapefmu.scenefile import parse_scene
 
 from .conftest import dual, scene
 

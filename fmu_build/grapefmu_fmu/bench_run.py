@@ -20,6 +20,7 @@ def main(scene_path: str) -> None:
     from fmpy.fmi2 import FMU2Slave
 
     from grapefmu import load_scene
+    from grapefmu.physics.excitation import accel
     scene = load_scene(scene_path)
     with tempfile.TemporaryDirectory() as d:
         fmu = Path(d) / "bench.fmu"
@@ -30,7 +31,7 @@ def main(scene_path: str) -> None:
         outs = [vr[f"angle_{b}"] for b in scene.model.names]
         unzip = extract(str(fmu))
         dt, steps = 1e-3, int(round(scene.solver.t_end / 1e-3))
-        acc = scene.excitation.accel(np.arange(steps) * dt)
+        acc = accel(scene.excitation, np.arange(steps) * dt)
         best, angles = float("inf"), None
         for rep in range(3):
             f = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,

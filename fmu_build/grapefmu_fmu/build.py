@@ -17,7 +17,7 @@ from xml.dom.minidom import parseString
 from xml.etree import ElementTree as ET
 
 import grapefmu
-from grapefmu.model import load_scene
+from grapefmu.scenefile import load_scene
 from grapefmu.results.writers import atomic_path
 
 from .units import BASE_UNITS
@@ -75,10 +75,10 @@ def build_fmu(scene_path: str | Path, out: str | Path, fmi: int = 2, outputs: st
     scene_path = Path(scene_path)
     scene = load_scene(scene_path)  # validates before anything is built
     if fmi not in (2, 3):
-        raise grapefmu.GrapefmuError(f"--fmi: expected 2 or 3, got {fmi!r}")
+        raise grapefmu.GrapefmuError(f"fmi: expected FMI version 2 or 3, got {fmi!r}")
     outputs = outputs or default_outputs(scene.model)
     if outputs not in OUTPUT_SETS:
-        raise grapefmu.GrapefmuError(f"--outputs: expected one of {', '.join(OUTPUT_SETS)}, got {outputs!r}")
+        raise grapefmu.GrapefmuError(f"outputs: expected one of {', '.join(OUTPUT_SETS)}, got {outputs!r}")
     if scene.excitation.kind == "csv":
         raise grapefmu.GrapefmuError("an FMU is driven by its inputs; remove the scene's [excitation] csv table")
     out = Path(out)

@@ -25,10 +25,13 @@ class GrapeSlaveMixin:
     scene_file = "scene.toml"
     TYPES: dict            # per FMI version: the variable class of each type
     KINDS: dict            # per FMI version: kinds(...)
+    INITIAL: type          # per FMI version: its `initial` enum
     UNITS = False          # whether the version's variables carry a unit
 
     def _register(self, var) -> None:
         kw = {"description": var.description, **self._accessors(var.name), **self.KINDS[var.causality, var.type == "real"]}
+        if var.channel is not None and var.causality == "output":
+            kw["initial"] = getattr(self.INITIAL, var.channel.fmi_initial)
         if self.UNITS and var.type == "real" and var.unit not in ("", "1"):
             kw["unit"] = var.unit
         self.register_variable(self.TYPES[var.type](var.name, **kw))

@@ -15,15 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from grapefmu import GrapefmuError, Solver
-from grapefmu.model.contact import LAWS
-from grapefmu.model.scene import parse_scene, scene_from_dict
-from grapefmu.physics.dynamics import observe
-from grapefmu.solver import core
-from grapefmu.solver.solver import SolverState
+from grapefmu.model.contact import LAWS, Law
+from grapefmu.results.catalogue import table
+from grapefmu.scenefile import parse_scene, scene_from_dict
+from grapefmu.solver import state as solver_state
+from grapefmu.solver.solver import MAX_ACCEL
 
-from .variables import OUTPUT_SETS, Var, default_outputs, pair_suffix, variables
-
-MAX_INPUT = 1e3  # m/s², the scene validator's bound on accelerations
+from .variables import OUTPUT_SETS, Var, default_outputs, variables
 
 
 OUTPUTS_FILE = "outputs.txt"  # in the resources next to the scene: "full" or "summary"
@@ -42,35 +40,30 @@ class FmuCore:
             raise GrapefmuError(f"{OUTPUTS_FILE}: expected one of {OUTPUT_SETS}, got {self.outputs!r}")
         self.full = self.outputs == "full"
         self.vars: list[Var] = variables(self.model, self.outputs)
-        self.bruising = 0
         self.values: dict[str, float | int | bool] = self._start_values()
         self.solver: Solver | None = None
         self.error: str | None = None
 
     # --- values -----------------------------------------------------------------------------------
     def _start_values(self) -> dict:
+        """Inputs and outputs start at zero (angles and rates at the scene's initial state, which their start
+        values set), parameters at the scene's values."""
         m, sc = self.model, self.scene
-        val: dict = {"base_ax": 0.0, "base_az": 0.0}
-        if self.full:
-            for k, d in enumerate(m.dof_names):
-                val.update({f"angle_{d}": sc.angles[k], f"angular_velocity_{d}": sc.angular_velocities[k]})
-            for b in m.berries:
-                val[f"pedicel_force_{b.name}"] = 0.0
-                if not b.spherical:
-                    val.update({f"mass_{b.name}": b.mass, f"radius_{b.name}": b.radius,
-                                f"twig_length_{b.name}": b.twig_length, f"hinge_x_{b.name}": b.hinge_x,
-                                f"hinge_stiffness_{b.name}": b.hinge_stiffness,
-                                f"hinge_damping_{b.name}": b.hinge_damping})
-            for p in range(len(m.pairs)):
-                s = pair_suffix(m, p)
-                val.update({f"contact_force{s}": 0.0, f"penetration{s}": 0.0, f"in_contact{s}": False})
-        val.update({"active_pairs": 0, "max_contact_force": 0.0, "max_pedicel_force": 0.0,
-                    "berries_over_detachment_force": 0, "bruising_impacts": 0})
+        val: dict = {}
+        for var in self.vars:
+            if var.channel is not None:
+                val[var.name] = {"real": 0.0, "integer": 0, "boolean": False}[var.type]
+        for k, d in enumerate(m.dof_names if self.full else ()):
+            val.update({f"angle_{d}": sc.angles[k], f"angular_velocity_{d}": sc.angular_velocities[k]})
+        for b in m.berries if self.full else ():
+            if not b.spherical:
+                val.update({f"{key}_{b.name}": getattr(b, key) for key in (
+                    "mass", "radius", "twig_length", "hinge_x", "hinge_stiffness", "hinge_damping")})
         law = m.pairs[0].law if m.pairs else None
         cp = m.couplings[0] if m.couplings else None
-        val.update({"collision_count": 0, "peak_contact_force": 0.0, "dissipated_energy": 0.0, "detachment_risk": False,
-                    "coupling_stiffness": cp.stiffness if cp else 0.0, "coupling_damping": cp.damping if cp else 0.0,
-                    "contact_law": law.code if law else 0, "contact_stiffness": law.stiffness if law else 2000.0,
+        val.update({"coupling_stiffness": cp.stiffness if cp else 0.0, "coupling_damping": cp.damping if cp else 0.0,
+                    "contact_law": int(law.law) if law else int(Law.KELVIN_VOIGT),
+                    "contact_stiffness": law.stiffness if law else 2000.0,
                     "contact_damping": law.damping if law else 0.0,
                     "restitution": (law.restitution or 0.0) if law else 0.0,
                     "gravity": m.gravity, "rtol": sc.solver.rtol})
@@ -119,10 +112,8 @@ class FmuCore:
         """Build the solver from the parameters; returns an error message instead of raising."""
         try:
             self.scene = self.scene_from_parameters()
-            self.solver = Solver(self.scene)
-            self.solver.state.fl[core.T] = start_time
+            self.solver = Solver(self.scene, t_start=start_time)
             self.error = None
-            self.bruising = 0
             self._update_outputs()
         except GrapefmuError as e:
             self.solver = None
@@ -140,59 +131,34 @@ class FmuCore:
             return f"currentCommunicationPoint {t!r} s does not continue from the FMU's time {self.solver.t!r} s"
         for name in ("base_ax", "base_az"):
             a = self.values[name]
-            if not (isinstance(a, (int, float)) and math.isfinite(a) and abs(a) <= MAX_INPUT):
-                return f"input {name} = {a!r}: expected a finite acceleration within ±{MAX_INPUT:g} m/s²; step refused"
+            if not (isinstance(a, (int, float)) and math.isfinite(a) and abs(a) <= MAX_ACCEL):
+                return f"input {name} = {a!r}: expected a finite acceleration within ±{MAX_ACCEL:g} m/s²; step refused"
         try:
             self.solver.advance(dt, (float(self.values["base_ax"]), float(self.values["base_az"])))
         except GrapefmuError as e:
             return f"step [{t:.9g}, {t + dt:.9g}] s refused: {e}"
-        th = self.scene.thresholds
-        imp = self.solver.take_impacts()
-        self.bruising += int(((imp.peak_force >= th.bruise_force) | (imp.dissipated >= th.bruise_energy)).sum())
+        self.solver.take_impacts()  # the totals count them; keep the list of finished impacts from growing
         self._update_outputs()
         return None
 
     def _update_outputs(self) -> None:
-        s, m, v = self.solver, self.model, self.values
-        S = s.state
-        n, d, p = m.n_berries, m.n_dof, len(m.pairs)
-        if not hasattr(self, "_obs"):
-            sfx = [pair_suffix(m, k) for k in range(p)]
-            self._obs = (np.zeros((n, 3)), np.zeros(2 * d + n + 3 * p + 3))
-            self._real_names = ([f"angle_{x}" for x in m.dof_names] + [f"angular_velocity_{x}" for x in m.dof_names]
-                                + [f"pedicel_force_{b}" for b in m.names] + [f"contact_force{x}" for x in sfx]
-                                + [f"penetration{x}" for x in sfx])
-            self._bool_names = [f"in_contact{x}" for x in sfx]
-        fext, out = self._obs
-        held = s._held or (0.0, 0.0)
-        observe(S.y, S.mode, S.v_onset, S.smooth, held[0], held[1], s.M, S.peak_force, S.peak_tension, fext, out)
-        if self.full:
-            vals = out.tolist()
-            k = len(self._real_names)
-            v.update(zip(self._real_names, vals))
-            v.update(zip(self._bool_names, (x > 0.5 for x in vals[k: k + len(self._bool_names)])))
-        o = 2 * d + n
-        peak_f, peak_t, dissipated = out[-3:].tolist()
-        v["active_pairs"] = int(np.count_nonzero(S.mode))
-        v["max_contact_force"] = float(out[o: o + p].max(initial=0.0))
-        v["max_pedicel_force"] = float(out[2 * d: o].max())
-        v["berries_over_detachment_force"] = int(np.count_nonzero(S.peak_tension > self.scene.thresholds.detachment_force))
-        v["bruising_impacts"] = self.bruising
-        v["collision_count"] = int(S.it[core.N_IMPACTS])
-        v["peak_contact_force"] = peak_f
-        v["dissipated_energy"] = dissipated
-        v["detachment_risk"] = v["detachment_risk"] or peak_t > self.scene.thresholds.detachment_force
+        """Every output from the catalogue, computed from the solver's snapshot."""
+        cast = {"real": float, "integer": int, "boolean": bool}
+        snap = self.solver.snapshot()
+        outputs = [v for v in self.vars if v.channel is not None and v.causality == "output"]
+        cols = table(snap, self.model, only=list({v.channel.name: v.channel for v in outputs}.values()))
+        for v in outputs:
+            self.values[v.name] = cast[v.type](cols[v.name][0])
 
     # --- FMU state --------------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {"values": dict(self.values), "solver": self.solver.get_state() if self.solver else None,
-                "error": self.error, "bruising": self.bruising}
+                "error": self.error}
 
     def set_state(self, state: dict) -> None:
         self.values.clear()  # in place: the FMI variables' getters and setters hold this dict
         self.values.update(state["values"])
         self.error = state["error"]
-        self.bruising = state["bruising"]
         if state["solver"] is not None:
             if self.solver is None:
                 self.solver = Solver(self.scene_from_parameters())
@@ -203,13 +169,12 @@ class FmuCore:
         """npz without pickles: a serialized state can be stored and read back safely."""
         arrays = {}
         if state["solver"] is not None:
-            arrays.update({f"solver.{k}": a for k, a in zip(SolverState._fields, state["solver"])})
+            arrays.update({f"solver.{k}": a for k, a in solver_state.flatten(state["solver"]).items()})
         names = sorted(state["values"])
         arrays["value_names"] = np.array(names)
         arrays["value_data"] = np.array([float(state["values"][k]) for k in names])
         arrays["value_kind"] = np.array([type(state["values"][k]).__name__ for k in names])
         arrays["error"] = np.array(state["error"] or "")
-        arrays["bruising"] = np.array(state["bruising"])
         buf = io.BytesIO()
         np.savez(buf, **arrays)
         return buf.getvalue()
@@ -219,6 +184,7 @@ class FmuCore:
         z = np.load(io.BytesIO(bytes(data)), allow_pickle=False)
         cast = {"bool": bool, "int": int, "float": float}
         values = {str(n): cast[str(k)](x) for n, x, k in zip(z["value_names"], z["value_data"], z["value_kind"])}
-        solver = (SolverState(*(z[f"solver.{k}"].copy() for k in SolverState._fields))
-                  if "solver.y" in z.files else None)
-        return {"values": values, "solver": solver, "error": str(z["error"]) or None, "bruising": int(z["bruising"])}
+        solver = None
+        if any(k.startswith("solver.") for k in z.files):
+            solver = solver_state.unflatten({k[len("solver."):]: z[k].copy() for k in z.files if k.startswith("solver.")})
+        return {"values": values, "solver": solver, "error": str(z["error"]) or None}

@@ -11,6 +11,7 @@ from .common import GrapeSlaveMixin, kinds
 
 class GrapeFmi2Slave(GrapeSlaveMixin, Fmi2Slave):
     TYPES = {"real": Real, "integer": Integer, "boolean": Boolean}
+    INITIAL = Fmi2Initial
     KINDS = kinds(Fmi2Causality, Fmi2Variability, Fmi2Initial)
 
     def __init__(self, **kwargs):

@@ -21,6 +21,7 @@ class _UnitWithoutBase(Unit):
 
 class GrapeFmi3Slave(GrapeSlaveMixin, Fmi3Slave):
     TYPES = {"real": Float64, "integer": Int32, "boolean": Boolean}
+    INITIAL = Fmi3Initial
     KINDS = kinds(Fmi3Causality, Fmi3Variability, Fmi3Initial)
     UNITS = True
 

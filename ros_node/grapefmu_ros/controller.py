@@ -22,9 +22,11 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
-from grapefmu.model.excitation import pick_and_place
+from builtin_interfaces.msg import Time
 
-from .messages import stamp
+from grapefmu.model.excitation import pick_and_place
+from grapefmu.physics.excitation import accel
+from grapefmu.recording.stamps import to_ns
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
 MOVES = [((0.0, 0.10), 0.4), ((0.30, 0.0), 0.6), ((0.0, -0.10), 0.4)]
@@ -71,12 +73,12 @@ class HarvestController(Node):
         self.try_command()
 
     def on_summary(self, m):
-        """The node's cluster totals: time and the largest contact force right now (SUMMARY_FIELDS)."""
+        """The node's summary: time and the largest contact force right now (messages.SUMMARY_FIELDS)."""
         fields = m.layout.dim[0].label.split(",") if m.layout.dim else []
-        if "time_s" not in fields:
+        if "time" not in fields:
             return
-        f = m.data[fields.index("max_contact_force_n")]
-        self.latest["force"] = (m.data[fields.index("time_s")], f)
+        f = m.data[fields.index("max_contact_force")]
+        self.latest["force"] = (m.data[fields.index("time")], f)
         self.peak_force = max(self.peak_force, f)
         self.try_command()
 
@@ -112,9 +114,10 @@ class HarvestController(Node):
             # fall fast, recover slowly: 20 ms and 200 ms time constants
             tau = 0.02 if target < self.rate else 0.2
             self.rate += (target - self.rate) * min(1.0, self.dt / tau)
-        a = self.profile.accel(self.s) * self.rate**2 if self.s < self.t_move_end else (0.0, 0.0)
+        a = accel(self.profile, self.s) * self.rate**2 if self.s < self.t_move_end else (0.0, 0.0)
         msg = AccelStamped()
-        msg.header.stamp = stamp(t)
+        ns = to_ns(t)
+        msg.header.stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
         msg.header.frame_id = "rachis"
         msg.accel.linear.x, msg.accel.linear.z = float(a[0]), float(a[1])
         self.pub.publish(msg)

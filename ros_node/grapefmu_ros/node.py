@@ -8,37 +8,37 @@ Either way every interval integrated is recorded as `rachis/accel_applied` (stam
 is what `grapefmu replay --check` needs to reproduce the run exactly."""
 from __future__ import annotations
 
+import importlib
 import math
 import time
 
 import numpy as np
 import rclpy
 import rclpy.executors
-from geometry_msgs.msg import AccelStamped, PoseStamped
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
-from visualization_msgs.msg import MarkerArray
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import WrenchStamped
 
 from grapefmu import GrapefmuError, Solver, load_scene
 from grapefmu.cli import default_scene_path
-from grapefmu.physics.dynamics import centres, observe
-from grapefmu.recording import topics as T
+from grapefmu.recording import messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
-from grapefmu.solver import core
+from grapefmu.recording.typestore import deserialize, serialize
 
-from . import messages as M
 from .recorder import McapRecorder, metadata
 
 EVENTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE)
 STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
+#: QoS per topic (default STATE_QOS)
+TOPIC_QOS = {"collision_events": EVENTS_QOS, "markers": 10, "/diagnostics": 10, "/clock": 10}
+
+
+def message_class(typename: str):
+    """The rclpy class of a ROS type name (it carries the type support; the bytes come from the typestore)."""
+    pkg, _, name = typename.partition("/msg/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
 def _range(lo, hi):
@@ -73,23 +73,13 @@ class SimulatorNode(Node):
         self.rate = gp("rate_hz")
         self.scene = load_scene(gp("scene"))
         m = self.scene.model
-        self.names = m.names
-        self.joints = m.dof_names  # joint_state() names them twig_<angle>
-        self.pairs = [(p.i, p.j) for p in m.pairs]
-        self.pair_topics = [f"contact/{m.pair_name(p)}/wrench" for p in range(len(m.pairs))] if T.per_pair_topics(m) else []
         self.recorder = McapRecorder(gp("record"), metadata(self.scene, self.mode, self.rate)) if gp("record") else None
-        self.pub_js = self.create_publisher(JointState, "joint_states", STATE_QOS)
-        self.pub_wrench = [self.create_publisher(WrenchStamped, t, STATE_QOS) for t in self.pair_topics]
-        self.pub_contacts = self.create_publisher(Float64MultiArray, "contacts", STATE_QOS)
-        self.pub_tension = self.create_publisher(JointState, "pedicel_tension", STATE_QOS)
-        self.pub_summary = self.create_publisher(Float64MultiArray, "summary", STATE_QOS)
-        self.pub_events = self.create_publisher(Float64MultiArray, "collision_events", EVENTS_QOS)
-        self.pub_markers = self.create_publisher(MarkerArray, "markers", 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.pub_applied = self.create_publisher(AccelStamped, "rachis/accel_applied", STATE_QOS)
-        self.pub_clock = self.create_publisher(Clock, "/clock", 10) if self.mode == "lockstep" else None
-        self.create_subscription(AccelStamped, "rachis/accel", self.on_accel, STATE_QOS)
-        self.create_subscription(PoseStamped, "rachis/pose", self.on_pose, STATE_QOS)
+        topics = ["joint_states", "pedicel_tension", *msgs.wrench_topics(m), "contacts", "summary", "collision_events",
+                  "markers", "/diagnostics", "rachis/accel_applied"] + (["/clock"] if self.mode == "lockstep" else [])
+        self.pubs = {t: self.create_publisher(message_class(msgs.topic_type(t)), t, TOPIC_QOS.get(t, STATE_QOS))
+                     for t in topics}
+        for topic, handler in (("rachis/accel", self.on_accel), ("rachis/pose", self.on_pose)):
+            self.create_subscription(message_class(msgs.topic_type(topic)), topic, handler, STATE_QOS, raw=True)
         self.create_service(Trigger, "reset", self.on_reset)
         self.create_service(SetBool, "pause", self.on_pause)
         self.paused = False
@@ -110,15 +100,9 @@ class SimulatorNode(Node):
         self.wall0 = time.monotonic()
         self.sim0 = 0.0
         self.last_tick = None
-        self.collisions = 0
-        self.bruising = 0
         self._last_marker = -math.inf
         self._pose = []
         self._pose_acc = np.zeros(2)
-        m = self.scene.model
-        self._fext = np.zeros((m.n_berries, 3))
-        self._pos = np.zeros((m.n_berries, 3))
-        self._obs = np.zeros(2 * m.n_dof + m.n_berries + 3 * len(m.pairs) + 3)
         self.publish_state()
 
     def advance(self, dt: float) -> bool:
@@ -131,63 +115,32 @@ class SimulatorNode(Node):
             self.failures += 1
             self.get_logger().error(f"step of {dt:.6g} s refused: {e}", throttle_duration_sec=1.0)
             return False
-        t = self.solver.t
-        applied = AccelStamped()
-        applied.header.stamp = M.stamp(t)
-        applied.header.frame_id = M.FRAME
-        applied.accel.linear.x, applied.accel.linear.z = self.accel
-        self.emit(self.pub_applied, "rachis/accel_applied", applied, t)
+        ns = to_ns(self.solver.t)
+        self.emit(*msgs.accel(ns, self.accel, "rachis/accel_applied"), ns)
         self.publish_state()
-        imp = self.solver.take_impacts()
-        th = self.scene.thresholds
-        for k in range(len(imp)):
-            self.collisions += 1
-            self.bruising += int(imp.peak_force[k] >= th.bruise_force or imp.dissipated[k] >= th.bruise_energy)
-            self.emit(self.pub_events, "collision_events", M.impact_message(imp, k), float(imp.end[k]))
+        for ns, topic, m in msgs.impact_messages(self.solver.take_impacts()):
+            self.emit(topic, m, ns)
         return True
 
     def publish_state(self):
-        s, t = self.solver, self.solver.t
-        S = s.state
-        b = s.M.berry
-        observe(S.y, S.mode, S.v_onset, S.smooth, self.accel[0], self.accel[1], s.M, S.peak_force, S.peak_tension,
-                self._fext, self._obs)
-        model = self.scene.model
-        n, d, npair = model.n_berries, model.n_dof, len(model.pairs)
-        q, w = S.y[:d], S.y[d: 2 * d]
-        effort = T.hinge_effort(model, q, w)
-        self.emit(self.pub_js, "joint_states", M.joint_state(t, self.joints, q, w, effort), t)
-        o = 2 * d + n
-        tension = self._obs[2 * d: o]
-        self.emit(self.pub_tension, "pedicel_tension", M.tension(t, self.names, tension), t)
-        forces, pen, touching = self._obs[o: o + npair], self._obs[o + npair: o + 2 * npair], S.mode != 0
+        """Every state topic (messages.py) from the solver's snapshot; markers at marker_rate_hz."""
+        t = self.solver.t
+        ns = to_ns(t)
         rate = self.get_parameter("marker_rate_hz").value
         markers_due = rate > 0 and t - self._last_marker >= 1.0 / rate - 1e-12
-        if self.pair_topics or markers_due:  # berry positions: only for wrench directions and markers
-            base = S.y[s.layout.base]
-            centres(S.y, s.M, self._pos)
-            origin = np.array([base[0], 0.0, base[1]])
-            berries = self._pos + origin
-        for p, topic in enumerate(self.pair_topics):
-            i, j = self.pairs[p]
-            dv = berries[j] - berries[i]
-            self.emit(self.pub_wrench[p], topic, M.wrench(t, forces[p] * dv / max(np.linalg.norm(dv), 1e-12)), t)
-        self.emit(self.pub_contacts, "contacts", M.labelled(list(T.CONTACT_FIELDS), T.contact_values(forces, pen, touching),
-                                                            rows=int(touching.sum())), t)
-        peak_f, peak_t, dissipated = self._obs[o + 3 * npair: o + 3 * npair + 3]
-        self.emit(self.pub_summary, "summary", M.labelled(list(T.SUMMARY_FIELDS), T.summary_values(
-            t, forces, tension, peak_f, peak_t, dissipated, touching)), t)
         if markers_due:
             self._last_marker = t
-            self.emit(self.pub_markers, "markers",
-                      M.markers(t, origin, b[:, [3, 6, 7]] + origin, berries, b[:, 1], self.pairs, forces), t)
-        if self.pub_clock is not None:
-            self.emit(self.pub_clock, "/clock", Clock(clock=M.stamp(t)), t)
+        for topic, m in msgs.state_messages(self.scene.model, self.solver.snapshot(), 0, ns, markers=markers_due):
+            self.emit(topic, m, ns)
+        if "/clock" in self.pubs:
+            self.emit(*msgs.clock(ns), ns)
 
-    def emit(self, pub, topic, msg, t):
-        pub.publish(msg)
+    def emit(self, topic: str, message, ns: int):
+        """Serialize once through the typestore; publish and record the same bytes."""
+        data = serialize(message)
+        self.pubs[topic].publish(data)
         if self.recorder:
-            self.recorder.write(topic, msg, to_ns(t))
+            self.recorder.write(topic, message.__msgtype__, data, ns)
 
     # --- inputs ---------------------------------------------------------------------------------
     def _valid(self, ax, ay, what) -> bool:
@@ -199,10 +152,16 @@ class SimulatorNode(Node):
             return False
         return True
 
-    def on_accel(self, msg: AccelStamped):
-        t_in = stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec)
+    def _received(self, topic: str, data: bytes):
+        """Decode an input through the typestore and record it (re-serialized: the one type system)."""
+        msg = deserialize(data, msgs.topic_type(topic))
+        t = stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec)
         if self.recorder:
-            self.recorder.write("rachis/accel", msg, to_ns(max(t_in, 0.0)))
+            self.recorder.write(topic, msg.__msgtype__, serialize(msg), to_ns(max(t, 0.0)))
+        return msg, t
+
+    def on_accel(self, data: bytes):
+        msg, t_in = self._received("rachis/accel", data)
         self._input(msg.accel.linear.x, msg.accel.linear.z, t_in, "rachis/accel")
 
     def _input(self, ax, ay, t_in, what):
@@ -222,11 +181,9 @@ class SimulatorNode(Node):
                 self.publish_state()  # an input at the current time still gets its answer
         self.accel = (float(ax), float(ay))
 
-    def on_pose(self, msg: PoseStamped):
+    def on_pose(self, data: bytes):
         """Acceleration from poses: second difference, then a first-order low-pass at pose_filter_hz."""
-        t = stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec)
-        if self.recorder:
-            self.recorder.write("rachis/pose", msg, to_ns(max(t, 0.0)))
+        msg, t = self._received("rachis/pose", data)
         p = np.array([msg.pose.position.x, msg.pose.position.z])
         if not np.all(np.isfinite(p)):
             self._valid(math.nan, math.nan, "rachis/pose")
@@ -278,23 +235,23 @@ class SimulatorNode(Node):
         wall_prev, cpu_prev = self._diag_last[0], self._diag_last[1]
         t = self.solver.t
         self._diag_last = (now, cpu, t)
-        S = self.solver.state
-        th = self.scene.thresholds
-        peak_t = float(S.peak_tension.max())
-        detach = peak_t > th.detachment_force
+        tot = self.solver.totals()[0]
+        stats = self.solver.stats
+        detach = bool(tot["berries_over_detachment_force"])
+        bruising = int(tot["bruising_impacts"])
         values = {
             "sim_time_s": f"{t:.6f}", "real_time_factor": f"{(t - sim_prev) / max(now - wall_prev, 1e-9):.4f}",
             "cpu_percent": f"{100 * (cpu - cpu_prev) / max(now - wall_prev, 1e-9):.1f}", "overruns": self.overruns,
-            "rejected_inputs": self.rejected, "refused_steps": self.failures, "collision_count": self.collisions,
-            "peak_contact_force_N": f"{float(S.peak_force.max()) if S.peak_force.size else 0.0:.6g}",
-            "peak_pedicel_force_N": f"{peak_t:.6g}", "detachment_risk": detach, "bruising_impacts": self.bruising,
-            "zeno_guard_activations": int(S.it[core.N_ZENO]), "paused": self.paused, "mode": self.mode,
+            "rejected_inputs": self.rejected, "refused_steps": self.failures,
+            **{k: (f"{float(tot[k]):.6g}" if tot.dtype[k].kind == "f" else int(tot[k])) for k in tot.dtype.names},
+            "detachment_risk": detach, "zeno_guard_activations": stats["zeno_guard_activations"],
+            "paused": self.paused, "mode": self.mode,
         }
-        warn = detach or self.bruising or self.rejected or self.failures
+        warn = detach or bruising or self.rejected or self.failures
         level = 2 if self.failures else (1 if warn else 0)
-        msg = "detachment risk" if detach else ("bruising impacts" if self.bruising else
+        msg = "detachment risk" if detach else ("bruising impacts" if bruising else
                                                 ("inputs rejected" if self.rejected else "ok"))
-        self.emit(self.pub_diag, "/diagnostics", M.diagnostics(t, level, msg, values), t)
+        self.emit(*msgs.diagnostics(to_ns(t), level, msg, values), to_ns(t))
 
     def close(self):
         if self.recorder:

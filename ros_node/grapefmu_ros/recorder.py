@@ -1,26 +1,19 @@
-"""Live MCAP recording of everything the node publishes and receives.
+"""Live MCAP recording of everything the node publishes and receives, through the one typestore.
 
-The writer keeps the chunk in progress in memory and the file is flushed after every message, so a
-completed chunk is on disk at once and a killed node loses at most the chunk in progress; a node
-stopped by SIGINT or SIGTERM finishes the file (summary and footer) on the way out."""
+Chunks are small and uncompressed and the file is flushed after every message, so a completed chunk is
+on disk at once and a killed node loses at most the chunk in progress; a node stopped by SIGINT or
+SIGTERM finishes the file (summary and footer) on the way out."""
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-from mcap.writer import CompressionType, Writer
-from rclpy.serialization import serialize_message
+from mcap.writer import CompressionType
 
 from grapefmu import __version__
-
-from .msgdefs import full_definition
+from grapefmu.recording.typestore import McapWriter
 
 CHUNK_BYTES = 64 * 1024
-
-
-def ros_type_name(msg) -> str:
-    mod = type(msg).__module__.split(".")[0]
-    return f"{mod}/msg/{type(msg).__name__}"
 
 
 class McapRecorder:
@@ -28,31 +21,21 @@ class McapRecorder:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._fh = open(self.path, "wb")
-        self._w = Writer(self._fh, chunk_size=CHUNK_BYTES, compression=CompressionType.NONE)
-        self._w.start(profile="ros2", library=f"grapefmu {__version__}")
+        self._w = McapWriter(self._fh, compression=CompressionType.NONE, chunk_size=CHUNK_BYTES)
         self._w.add_metadata("grapefmu", metadata)
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, int] = {}
-        self._seq: dict[str, int] = {}
         self.closed = False
 
-    def write(self, topic: str, msg, t_ns: int) -> None:
+    def write(self, topic: str, typename: str, data: bytes, t_ns: int) -> None:
+        """Append bytes serialized by the typestore."""
         if self.closed:
             return
-        dtype = ros_type_name(msg)
-        if dtype not in self._schemas:
-            self._schemas[dtype] = self._w.register_schema(dtype, "ros2msg", full_definition(dtype).encode())
-        if topic not in self._channels:
-            self._channels[topic] = self._w.register_channel(topic, "cdr", self._schemas[dtype])
-        seq = self._seq[topic] = self._seq.get(topic, -1) + 1
-        self._w.add_message(self._channels[topic], log_time=t_ns, data=serialize_message(msg), publish_time=t_ns,
-                            sequence=seq)
+        self._w.write_raw(topic, typename, data, t_ns)
         self._fh.flush()  # cheap: only a chunk the writer has just completed is waiting here
 
     def close(self) -> None:
         if not self.closed:
             self.closed = True
-            self._w.finish()
+            self._w.close()
             self._fh.close()
 
 

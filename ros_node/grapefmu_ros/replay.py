@@ -1,30 +1,23 @@
 """`grapefmu replay run.mcap --publish [--rate X]`: republish a recording's topics, paced by their log
 times (rate 1 = real time, 0 = as fast as possible), with /clock.
 
-Each message is deserialized and published as a message object: publishing the recorded CDR bytes
-directly reached no subscriber over Fast DDS's default shared-memory transport here (it did over UDP)."""
+The recorded CDR bytes (written through grapefmu's one typestore) are published as they are."""
 from __future__ import annotations
 
-import importlib
 import time
 
 import rclpy
 from rclpy.duration import Duration
-from rclpy.serialization import deserialize_message
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
+from grapefmu.recording import messages as msgs
 from grapefmu.recording.replay import iter_messages
-from grapefmu.recording.stamps import seconds
+from grapefmu.recording.typestore import serialize
 
-from .messages import stamp
+from .node import message_class
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def message_class(datatype: str):
-    pkg, _, name = datatype.partition("/msg/")
-    return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
 #: Discovery before playing (like rosbag2 play --delay): at least MIN, then until a subscriber has matched,
@@ -68,12 +61,11 @@ def publish(path: str, rate: float = 1.0) -> int:
                         continue
                     t0 = r.log_time if t0 is None else t0
                     if rate > 0:
-                        delay = seconds(r.log_time - t0) / rate - (time.monotonic() - wall0)
+                        delay = (r.log_time - t0) / 1e9 / rate - (time.monotonic() - wall0)
                         if delay > 0:
                             time.sleep(delay)
-                    clock.publish(Clock(clock=stamp(seconds(r.log_time))))
-                    pub, cls = pubs[ch.topic]
-                    pub.publish(deserialize_message(bytes(r.data), cls))
+                    clock.publish(serialize(msgs.clock(r.log_time)[1]))
+                    pubs[ch.topic][0].publish(bytes(r.data))
                     n += 1
             except Exception as e:  # noqa: BLE001 - a torn end: report, keep what was published
                 print(f"warning: {path} ends abruptly ({type(e).__name__}); stopped after {n} messages")

@@ -1,6 +1,7 @@
 """grapefmu: berries on hinged twigs that swing and collide when a gripper moves the rachis."""
 from .errors import GrapefmuError, SceneError, SolverError
-from .model import Model, Scene, load_scene, parse_scene
+from .model import Model, Scene
+from .scenefile import load_scene, parse_scene
 
 __version__ = "0.1.0"
 

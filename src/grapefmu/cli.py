@@ -46,12 +46,12 @@ def _summary_table(run) -> str:
                    f"{s.get('rhs_evaluations', '-')} RHS evaluations, {1e3 * s['wall_time']:.2f} ms wall"),
         ("collisions", str(s["collision_count"])),
         ("peak contact force", f"{s['peak_contact_force']:.4g} N"),
-        ("peak pedicel tension", f"{s['peak_pedicel_force']:.4g} N"),
+        ("peak pedicel tension", f"{s['peak_pedicel_tension']:.4g} N"),
         ("largest impact energy", f"{1e3 * s['max_impact_energy']:.4g} mJ"),
-        ("energy dissipated", f"{1e3 * s['energy_dissipated']:.4g} mJ"),
+        ("energy dissipated", f"{1e3 * s['dissipated_energy']:.4g} mJ"),
         ("energy ledger error", f"{run.ledger_error():.2e} (relative)"),
-        ("detachment risk", ("YES: " + ", ".join(s["berries_over_detachment_force"][:10])
-                             + (", ..." if len(s["berries_over_detachment_force"]) > 10 else ""))
+        ("detachment risk", ("YES: " + ", ".join(s["detached_berries"][:10])
+                             + (", ..." if len(s["detached_berries"]) > 10 else ""))
          if s["detachment_risk"] else "no"),
         ("bruising impacts", str(s["bruising_impacts"])),
         ("fatigue impacts", str(s["fatigue_impacts"])),
@@ -62,7 +62,7 @@ def _summary_table(run) -> str:
                                f"candidate pairs ({run.scene.model.pairs_pruned} never within reach left out), "
                                f"{st.get('near_pairs_mean', float('nan')):.1f} near pairs per step, "
                                f"at most {s['max_active_pairs']} in contact, {st.get('groups', 1)} independent group(s)"))
-        rows.append(("berries over detachment", str(s["n_berries_over_detachment_force"])))
+        rows.append(("berries over detachment", str(s["berries_over_detachment_force"])))
         rows.append(("dissipated per berry", f"largest {1e3 * s['max_dissipated_per_berry']:.4g} mJ, "
                                              f"mean {1e3 * s['mean_dissipated_per_berry']:.4g} mJ"))
     if s.get("zeno_guard_activations"):
@@ -72,8 +72,8 @@ def _summary_table(run) -> str:
 
 
 def cmd_simulate(a: argparse.Namespace) -> int:
-    from .model import load_scene
-    from .results.writers import write_run
+    from .scenefile import load_scene
+    from .write import write_run
     from .solver.api import simulate
 
     scene = load_scene(a.scene or default_scene_path())
@@ -93,8 +93,8 @@ def cmd_simulate(a: argparse.Namespace) -> int:
 
 def cmd_cluster(a: argparse.Namespace) -> int:
     from .cluster.generate import ClusterSpec, RowSpec, Spread, cluster_scene, row_scene
-    from .model.scene import scene_from_dict
-    from .model.toml_out import dumps
+    from .scenefile import scene_from_dict
+    from .scenefile import dumps
     from .results.writers import atomic_path
 
     out = Path(a.output)
@@ -160,6 +160,12 @@ def cmd_replay(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_outputs(a: argparse.Namespace) -> int:
+    from .results.catalogue import markdown
+    sys.stdout.write(markdown())
+    return 0
+
+
 def cmd_bench(a: argparse.Namespace) -> int:
     if a.scale:
         from .bench.scale import main as scale
@@ -220,6 +226,8 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
     w.add_argument("--scheduler", help="a Dask distributed scheduler address, tcp://host:port, instead")
     w.set_defaults(func=cmd_sweep)
+    o = sub.add_parser("outputs", help="list every output channel (name, unit, ROS topic, FMU causality) as Markdown")
+    o.set_defaults(func=cmd_outputs)
     p = sub.add_parser("paper", help="reproduce tests 1–9 of Xu et al. (2025) and check each claim")
     p.add_argument("--out", default="out/paper", help="directory for figures and the claims report")
     p.set_defaults(func=cmd_paper)

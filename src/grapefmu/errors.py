@@ -23,3 +23,8 @@ class SolverError(GrapefmuError, RuntimeError):
 
     The solver state is left as it was before the failing call.
     """
+
+
+class RecordingError(GrapefmuError):
+    """A recording cannot be written or read as asked (an unknown message field, a topic of another type,
+    a file that is not a grapefmu MCAP recording)."""

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import GrapefmuError
+from ..physics.excitation import accel
 from ..solver.api import simulate
 
 GRID = 1e-3
@@ -89,7 +90,7 @@ def mujoco_run(scene, integrator, dt):
     varying = ex.kind != "none"
     out = [data.qpos[:n].copy()]
     if varying:  # the inertial field changes every step: one call per step
-        acc = ex.accel(np.arange(steps) * dt)
+        acc = accel(ex, np.arange(steps) * dt)
         for k in range(steps):
             model.opt.gravity[:] = (-acc[k, 0], 0.0, -g - acc[k, 1])
             mujoco.mj_step(model, data)

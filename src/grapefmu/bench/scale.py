@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..cluster.generate import DEFAULT_MOVES, ClusterSpec, RowSpec, cluster_scene, row_scene
-from ..model.scene import scene_from_dict
+from ..scenefile import scene_from_dict
 from ..results.writers import atomic_path
 from ..solver import solver as solver_module
 from ..solver.api import simulate

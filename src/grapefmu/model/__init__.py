@@ -1,8 +1,7 @@
-"""The immutable, validated model and scene (what is simulated, not how)."""
-from .contact import ContactLaw, hunt_crossley_chi, kelvin_voigt_damping
+"""The immutable, validated model and scene (what is simulated, not how): pure data, no physics."""
+from .contact import ContactLaw, Law, hunt_crossley_chi, kelvin_voigt_damping
 from .excitation import Excitation
-from .model import Berry, ContactPair, Coupling, Model, Scene, SolverSettings, Thresholds
-from .scene import load_scene, parse_scene
+from .model import Berry, ContactPair, Coupling, Model, ModelArrays, Scene, SolverSettings, Thresholds
 
-__all__ = ["Berry", "ContactLaw", "ContactPair", "Coupling", "Excitation", "Model", "Scene", "SolverSettings",
-           "Thresholds", "hunt_crossley_chi", "kelvin_voigt_damping", "load_scene", "parse_scene"]
+__all__ = ["Berry", "ContactLaw", "ContactPair", "Coupling", "Excitation", "Law", "Model", "ModelArrays", "Scene",
+           "SolverSettings", "Thresholds", "hunt_crossley_chi", "kelvin_voigt_damping"]

@@ -10,10 +10,28 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import IntEnum
 from functools import lru_cache
 
-LAWS = ("kelvin-voigt", "hertz", "hunt-crossley")
-LAW_CODE = {name: code for code, name in enumerate(LAWS)}
+
+class Law(IntEnum):
+    """The contact laws of docs/model.md §3; the compiled core reads the same members as integers."""
+
+    KELVIN_VOIGT = 0
+    HERTZ = 1
+    HUNT_CROSSLEY = 2
+
+    @property
+    def label(self) -> str:
+        """The name scene files and interfaces use (``kelvin-voigt``)."""
+        return self.name.lower().replace("_", "-")
+
+    @classmethod
+    def from_label(cls, label: str) -> Law:
+        return cls[label.upper().replace("-", "_")]
+
+
+LAWS = tuple(law.label for law in Law)
 
 #: Floor for the Hunt–Crossley onset speed δ̇⁻ (m/s). Without it a pair that starts
 #: pre-compressed, or touches at almost zero speed, would see unbounded damping.
@@ -37,8 +55,8 @@ class ContactLaw:
     restitution: float | None = None
 
     @property
-    def code(self) -> int:
-        return LAW_CODE[self.kind]
+    def law(self) -> Law:
+        return Law.from_label(self.kind)
 
 
 def kelvin_voigt_damping_ratio(e: float) -> float:

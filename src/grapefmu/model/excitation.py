@@ -1,6 +1,6 @@
-"""Base excitation: the acceleration a(t) = (ax, ay) of the rachis held by the gripper.
+"""Base excitation: the acceleration a(t) = (a_x, a_z) of the rachis held by the gripper.
 
-Every kind compiles to one of three numeric forms the compiled core evaluates:
+Every kind compiles to one of three numeric forms that physics/excitation.py evaluates:
 a constant (also the zero-order hold the FMU and ROS node feed), a windowed chirp
 (sine, sweep and half-sine impulse are chirps), or a piecewise-linear table
 (jerk-limited pick-and-place moves and CSV files). Each form lists its breakpoints,
@@ -22,7 +22,7 @@ CONSTANT, CHIRP, TABLE = 0, 1, 2
 
 
 class ExcitationArrays(NamedTuple):
-    """What the compiled core reads: kind code, parameters, table rows (t, ax, ay), breakpoints."""
+    """What the compiled core reads: kind code, parameters, table rows (t, a_x, a_z), breakpoints."""
 
     kind: int
     par: np.ndarray
@@ -37,22 +37,6 @@ class Excitation:
     kind: str
     arrays: ExcitationArrays
     description: str = ""
-
-    def accel(self, t: np.ndarray | float) -> np.ndarray:
-        """a(t) as an array (..., 2), evaluated in NumPy (for plots and checks, not the solver)."""
-        t = np.asarray(t, dtype=float)
-        a = self.arrays
-        if a.kind == CONSTANT:
-            return np.broadcast_to(a.par[:2], t.shape + (2,)).copy()
-        if a.kind == CHIRP:
-            ax, ay, f0, f1, start, dur = a.par[:6]
-            tau = t - start
-            on = (tau >= 0) & (tau < dur)
-            s = np.where(on, np.sin(2 * np.pi * (f0 * tau + 0.5 * (f1 - f0) * tau**2 / dur)), 0.0)
-            return np.stack([ax * s, ay * s], axis=-1)
-        tab = a.table
-        inside = (t >= tab[0, 0]) & (t <= tab[-1, 0])
-        return np.stack([np.where(inside, np.interp(t, tab[:, 0], tab[:, i]), 0.0) for i in (1, 2)], axis=-1)
 
 
 def constant(ax: float = 0.0, ay: float = 0.0) -> Excitation:

@@ -60,18 +60,36 @@ class Coupling:
     damping: float    # N·s/m
 
 
-class ModelArrays(NamedTuple):
-    """The model as the compiled core reads it (one array per kind of parameter)."""
+#: one berry as the compiled core reads it (docs/model.md names); a field of M.berry is a named array per property
+BERRY = np.dtype([("mass", "f8"), ("radius", "f8"), ("twig_length", "f8"), ("hinge_x", "f8"), ("hinge_y", "f8"),
+                  ("hinge_z", "f8"), ("hinge_stiffness", "f8"), ("hinge_damping", "f8"), ("rest_swing", "f8"),
+                  ("rest_tilt", "f8"), ("azimuth_cos", "f8"), ("azimuth_sin", "f8"), ("dof", "i8"), ("n_angles", "i8")],
+                 align=True)
+#: one candidate contact pair
+PAIR = np.dtype([("i", "i8"), ("j", "i8"), ("law", "i8"), ("stiffness", "f8"), ("damping", "f8"), ("clamp", "?")],
+                align=True)
+#: one k3/c3 coupling
+COUPLING = np.dtype([("i", "i8"), ("j", "i8"), ("stiffness", "f8"), ("damping", "f8")], align=True)
 
-    berry: np.ndarray      # (N, 12): mass, radius, twig_length, hinge_x, hinge_stiffness, hinge_damping,
-                           #          hinge_y, hinge_z, rest swing, rest tilt, cos(azimuth), sin(azimuth)
-    dof: np.ndarray        # (N + 1,) int: berry i's angles are q[dof[i]:dof[i + 1]]
-    pair_idx: np.ndarray   # (P, 2) int
-    pair_law: np.ndarray   # (P,) int: 0 kelvin-voigt, 1 hertz, 2 hunt-crossley
-    pair_par: np.ndarray   # (P, 3): stiffness, damping (c or χ), clamp (1.0 or 0.0)
-    coup_idx: np.ndarray   # (C, 2) int
-    coup_par: np.ndarray   # (C, 2): stiffness, damping
-    gravity: float
+
+class ModelArrays(NamedTuple):
+    """The model as the compiled core reads it (MuJoCo's mjModel): one named field per property, in
+    docs/model.md's names; `M.berry["mass"]` is the array of masses. Record arrays rather than loose
+    arrays, and scalar fields only, because every array (or array view) a compiled function touches costs
+    a reference count.
+
+    berry (N,) BERRY: mass kg, radius m, twig_length l m, hinge_x/y/z h m, hinge_stiffness k N·m/rad,
+      hinge_damping c N·m·s/rad, rest_swing/rest_tilt (s₀, t₀) rad, azimuth_cos/sin (R_z(ψ)), dof (its first
+      angle's index in q) and n_angles (1 planar, 2 spherical).
+    pair (P,) PAIR: berries i < j, law (contact.Law), stiffness k (N/m) or K (N/m^1.5), damping c (N·s/m)
+      or χ (hunt-crossley), clamp (the no-tension clamp).
+    coupling (C,) COUPLING: berries i, j, stiffness k3 N/m, damping c3 N·s/m."""
+
+    berry: np.ndarray
+    pair: np.ndarray
+    coupling: np.ndarray
+    gravity: float   # m/s²
+    n_dof: int       # D: angles in q
 
 
 @dataclass(frozen=True)
@@ -109,17 +127,20 @@ class Model:
 
     @cached_property
     def arrays(self) -> ModelArrays:
-        berry = np.array([[b.mass, b.radius, b.twig_length, b.hinge_x, b.hinge_stiffness, b.hinge_damping,
-                           b.hinge_y, b.hinge_z, *b.rest_angles, np.cos(b.azimuth), np.sin(b.azimuth)]
-                          for b in self.berries], dtype=float).reshape(-1, 12)
-        dof = np.r_[0, np.cumsum([b.ndof for b in self.berries])].astype(np.int64)
-        pair_idx = np.array([[p.i, p.j] for p in self.pairs], dtype=np.int64).reshape(-1, 2)
-        pair_law = np.array([p.law.code for p in self.pairs], dtype=np.int64)
-        pair_par = np.array([[p.law.stiffness, p.law.damping, 1.0 if p.law.clamp else 0.0]
-                             for p in self.pairs], dtype=float).reshape(-1, 3)
-        coup_idx = np.array([[c.i, c.j] for c in self.couplings], dtype=np.int64).reshape(-1, 2)
-        coup_par = np.array([[c.stiffness, c.damping] for c in self.couplings], dtype=float).reshape(-1, 2)
-        return ModelArrays(berry, dof, pair_idx, pair_law, pair_par, coup_idx, coup_par, float(self.gravity))
+        dof = np.r_[0, np.cumsum([x.ndof for x in self.berries])].astype(np.int64)
+        berry = np.zeros(self.n_berries, dtype=BERRY)
+        for k, b in enumerate(self.berries):
+            berry[k] = (b.mass, b.radius, b.twig_length, b.hinge_x, b.hinge_y, b.hinge_z, b.hinge_stiffness,
+                        b.hinge_damping, *b.rest_angles, np.cos(b.azimuth), np.sin(b.azimuth), dof[k], b.ndof)
+        pair = np.array([(p.i, p.j, int(p.law.law), p.law.stiffness, p.law.damping, p.law.clamp) for p in self.pairs],
+                        dtype=PAIR)
+        coupling = np.array([(c.i, c.j, c.stiffness, c.damping) for c in self.couplings], dtype=COUPLING)
+        return ModelArrays(berry, pair, coupling, float(self.gravity), int(dof[-1]))
+
+    @cached_property
+    def dof(self) -> np.ndarray:
+        """(N + 1,): berry i's angles are q[dof[i]:dof[i + 1]]."""
+        return np.r_[0, np.cumsum([b.ndof for b in self.berries])].astype(np.int64)
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model import load_scene
+from ..scenefile import load_scene
 from ..results.plot import _pyplot
 from ..results.run import Run
 from ..results.writers import atomic_path
@@ -28,10 +28,10 @@ def run_all() -> dict[str, Run]:
 
 def berry_energies(run: Run, i: int) -> tuple[np.ndarray, np.ndarray]:
     """Kinetic and potential (gravity + hinge) energy of berry i, J."""
-    b = run.scene.model.arrays.berry[i]
+    b = run.scene.model.berries[i]
     q, w = run.angles[:, i], run.angular_velocities[:, i]
-    ke = 0.5 * b[0] * b[2] ** 2 * w**2
-    pe = b[0] * run.scene.model.gravity * b[2] * (1 - np.cos(q)) + 0.5 * b[4] * q**2
+    ke = 0.5 * b.mass * b.twig_length**2 * w**2
+    pe = b.mass * run.scene.model.gravity * b.twig_length * (1 - np.cos(q)) + 0.5 * b.hinge_stiffness * q**2
     return ke, pe
 
 

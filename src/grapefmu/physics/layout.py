@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numpy as np
+
 
 class Layout(NamedTuple):
     n: int
@@ -33,3 +35,13 @@ def layout(n: int, d: int, c: int) -> Layout:
     o = 2 * d + n + c
     return Layout(n, d, c, slice(0, d), slice(d, 2 * d), slice(2 * d, 2 * d + n), slice(2 * d + n, o),
                   o, o + 1, slice(o + 2, o + 4), slice(o + 4, o + 6), o + 6)
+
+
+#: the energy integrals that ride along in y, in the order ledger() returns them
+LEDGER_TERMS = ("dissipated_hinge", "dissipated_coupling", "dissipated_contact", "base_work")
+
+
+def ledger(lay: Layout, y):
+    """The energy integrals (..., 4) of LEDGER_TERMS, J, for y of shape (..., size)."""
+    return np.stack([y[..., lay.d_hinge].sum(axis=-1), y[..., lay.d_coupling].sum(axis=-1), y[..., lay.d_contact],
+                     y[..., lay.work]], axis=-1)

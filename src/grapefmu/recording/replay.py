@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import GrapefmuError
-from ..model.scene import parse_scene
+from ..errors import RecordingError
+from ..scenefile import parse_scene
 from .stamps import stamp_seconds
 
 
@@ -50,14 +50,13 @@ def iter_messages(fh, on_metadata=None):
 
 
 def read_recording(path: str | Path, topics: set[str] | None = None) -> Recording:
-    from mcap_ros2.decoder import DecoderFactory
+    """Every message (of the given topics), decoded through the typestore that wrote it."""
+    from .typestore import deserialize
 
     path = Path(path)
     if not path.exists():
-        raise GrapefmuError(f"{path}: no such recording")
+        raise RecordingError(f"{path}: no such recording")
     rec = Recording(path, {})
-    factory = DecoderFactory()
-    decoders = {}
 
     def keep_metadata(r):
         if r.name == "grapefmu":
@@ -67,15 +66,13 @@ def read_recording(path: str | Path, topics: set[str] | None = None) -> Recordin
             for schema, ch, r in iter_messages(fh, keep_metadata):
                 if topics and ch.topic not in topics:
                     continue
-                if ch.id not in decoders:
-                    decoders[ch.id] = factory.decoder_for(ch.message_encoding, schema)
-                rec.topics.setdefault(ch.topic, []).append((r.log_time, decoders[ch.id](r.data)))
+                rec.topics.setdefault(ch.topic, []).append((r.log_time, deserialize(r.data, schema.name)))
                 rec.count += 1
         except Exception as e:  # noqa: BLE001 - mcap raises several types at a torn end
             rec.truncated = (f"{path} ends abruptly ({type(e).__name__}: the recorder did not close it, probably "
                              f"killed); {rec.count} messages read, up to t = {rec.last_time:.6f} s")
     if "scene_toml" not in rec.metadata:
-        raise GrapefmuError(f"{path}: no grapefmu metadata record (scene and solver settings); not a grapefmu recording")
+        raise RecordingError(f"{path}: no grapefmu metadata record (scene and solver settings); not a grapefmu recording")
     return rec
 
 
@@ -101,7 +98,7 @@ def check(path: str | Path) -> CheckResult:
         recorded[stamp_seconds(m.header.stamp.sec, m.header.stamp.nanosec)] = (np.array(m.position),
                                                                                np.array(m.velocity))
     if not recorded:
-        raise GrapefmuError(f"{path}: no joint_states to compare")
+        raise RecordingError(f"{path}: no joint_states to compare")
     source = rec.metadata.get("input_source", "scene")
     dq = dw = 0.0
     n = 0
@@ -130,5 +127,5 @@ def check(path: str | Path) -> CheckResult:
                 dw = max(dw, float(np.abs(solver.angular_velocities - w).max()))
                 n += 1
     if n == 0:
-        raise GrapefmuError(f"{path}: no recorded joint state matches a re-simulated time")
+        raise RecordingError(f"{path}: no recorded joint state matches a re-simulated time")
     return CheckResult(n, dq, dw, source, rec.truncated)

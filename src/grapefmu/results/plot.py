@@ -40,7 +40,7 @@ def plot_run(run: Run, path: str | Path, title: str | None = None) -> None:
     ax[1].set_ylabel("contact force (N)")
     ax[1].legend(loc="upper right", fontsize=8)
     for i, name in enumerate(m.names):
-        ax[2].plot(t, run.pedicel_force[:, i], label=name)
+        ax[2].plot(t, run.pedicel_tension[:, i], label=name)
     ax[2].axhline(th.detachment_force, color="r", ls="--", lw=0.8, label=f"detachment {th.detachment_force:g} N")
     ax[2].set_ylabel("pedicel tension (N)")
     ax[2].legend(loc="upper right", fontsize=8)
@@ -63,7 +63,7 @@ def plot_run(run: Run, path: str | Path, title: str | None = None) -> None:
 def _finish(plt, fig, run: Run, path: str | Path, title: str | None) -> None:
     s = run.summary()
     fig.suptitle(title or f"{run.scene.name}: {s['berries']} berries, {s['collision_count']} impacts, peak contact "
-                 f"{s['peak_contact_force']:.3g} N, peak pedicel {s['peak_pedicel_force']:.3g} N, "
+                 f"{s['peak_contact_force']:.3g} N, peak pedicel {s['peak_pedicel_tension']:.3g} N, "
                  f"ledger error {run.ledger_error():.1e}", fontsize=10)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format=Path(path).suffix.lstrip(".") or "png")
@@ -84,9 +84,9 @@ def plot_cluster(run: Run, path: str | Path, title: str | None = None) -> None:
     k_max = int(np.argmax(moved))
     for col, (k, label) in enumerate(((0, "t = 0"), (k_max, f"largest swing, t = {t[k_max]:.3f} s"))):
         ax = fig.add_subplot(grid[0, col], projection="3d")
-        r = run.scene.model.arrays.berry[:, 1]
+        r = run.scene.model.arrays.radius
         ax.scatter(pos[k, :, 0], pos[k, :, 1], pos[k, :, 2], s=(r / r.max()) ** 2 * 60,
-                   c=run.pedicel_force[k], cmap="viridis", depthshade=False)
+                   c=run.pedicel_tension[k], cmap="viridis", depthshade=False)
         ax.set_title(f"berries, {label} (colour: pedicel tension)", fontsize=9)
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
@@ -97,8 +97,8 @@ def plot_cluster(run: Run, path: str | Path, title: str | None = None) -> None:
     ax.set_ylabel("force (N)")
     ax.legend(loc="upper right", fontsize=8)
     ax = fig.add_subplot(grid[1, 1])
-    ax.plot(t, run.pedicel_force.max(axis=1), lw=0.8, label="largest pedicel tension")
-    ax.plot(t, np.median(run.pedicel_force, axis=1), lw=0.8, label="median")
+    ax.plot(t, run.pedicel_tension.max(axis=1), lw=0.8, label="largest pedicel tension")
+    ax.plot(t, np.median(run.pedicel_tension, axis=1), lw=0.8, label="median")
     ax.axhline(th.detachment_force, color="r", ls="--", lw=0.8, label=f"detachment {th.detachment_force:g} N")
     ax.set_ylabel("tension (N)")
     ax.legend(loc="upper right", fontsize=8)

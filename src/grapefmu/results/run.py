@@ -1,4 +1,8 @@
-"""`Run`: what one simulation reports (samples, impacts, energy ledger, summary and indicators)."""
+"""`Run`: what one simulation reports (samples, impacts, energy ledger, summary and indicators).
+
+Every reported quantity comes from the output catalogue (catalogue.py) evaluated on the run's
+`snapshot()`, so a run's columns, its recordings and what the FMU and the ROS node report agree.
+"""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -8,77 +12,27 @@ from typing import Any
 import numpy as np
 
 from ..model.model import Scene
-from ..physics.dynamics import centres, derived
-from ..physics.layout import Layout, layout
-from ..solver import core
-
-ENERGY_TERMS = ("kinetic", "gravity", "hinge_elastic", "coupling_elastic", "contact_elastic")
-
-
-@dataclass
-class Impacts:
-    """One row per impact: from the pair's first touch (δ = 0, closing) to its separation."""
-
-    pair: np.ndarray          # index into model.pairs
-    onset: np.ndarray         # s
-    end: np.ndarray           # s (the run's end for an impact still going on)
-    approach_speed: np.ndarray  # m/s, δ̇ at onset
-    separation_speed: np.ndarray  # m/s, −δ̇ at separation (NaN while ongoing)
-    peak_force: np.ndarray    # N
-    peak_time: np.ndarray     # s
-    impulse: np.ndarray       # N·s
-    dissipated: np.ndarray    # J
-    ongoing: np.ndarray       # bool
-
-    @property
-    def duration(self) -> np.ndarray:
-        return self.end - self.onset
-
-    def __len__(self) -> int:
-        return len(self.onset)
-
-    @classmethod
-    def from_rows(cls, rows: np.ndarray, ongoing: np.ndarray | None = None) -> Impacts:
-        rows = rows.reshape(-1, core.IMPACT_COLUMNS)
-        order = np.argsort(rows[:, core.I_ONSET], kind="stable")
-        rows = rows[order]
-        og = np.zeros(len(rows), dtype=bool) if ongoing is None else ongoing[order]
-        return cls(rows[:, core.I_PAIR].astype(int), rows[:, core.I_ONSET], rows[:, core.I_END], rows[:, core.I_SPEED],
-                   rows[:, core.I_SEP_SPEED], rows[:, core.I_PEAK], rows[:, core.I_TPEAK], rows[:, core.I_IMPULSE],
-                   rows[:, core.I_DISS], og)
+from ..physics import observe as obs
+from ..physics.damage import detaching, fatigue
+from ..physics.layout import Layout, ledger, layout
+from . import catalogue
+from .impacts import Impacts
 
 
 @dataclass
 class Run:
     scene: Scene
-    t: np.ndarray
-    y: np.ndarray
-    mode: np.ndarray
-    accel: np.ndarray
-    v_onset: np.ndarray
-    smooth: np.ndarray
+    t: np.ndarray            # (S,) s
+    y: np.ndarray            # (S, ny): physics/layout.py
+    contacts: np.ndarray     # (S, P) physics.forces.CONTACT: each pair's mode, onset speed, smooth flag
+    accel: np.ndarray        # (S, 2) m/s², (a_x, a_z) of the rachis
+    totals: np.ndarray       # (S,) records.TOTALS at each sample (as of the solver step before it)
     impacts: Impacts
-    peak_force: np.ndarray      # per pair, N (refined on the dense output where the method allows)
-    peak_tension: np.ndarray    # per berry, N
+    peak_force: np.ndarray   # (P,) N, per pair, refined on the dense output where the method allows
+    peak_tension: np.ndarray  # (N,) N, per berry
     stats: dict[str, Any] = field(default_factory=dict)
 
-    @classmethod
-    def from_solver(cls, scene: Scene, samples, rows: np.ndarray, solver, stats) -> Run:
-        S = solver.state
-        open_rows = []
-        for p in range(S.mode.shape[0]):
-            if S.mode[p] != 0:
-                o = S.imp_open[p]
-                open_rows.append([p, o[core.O_ONSET], S.fl[core.T], o[core.O_SPEED], o[core.O_PEAK], o[core.O_TPEAK],
-                                  S.pair_int[p, 0] - o[core.O_J], S.pair_int[p, 1] - o[core.O_D], np.nan])
-        allrows = np.vstack([rows.reshape(-1, core.IMPACT_COLUMNS)] + [np.array(open_rows).reshape(-1, core.IMPACT_COLUMNS)])
-        ongoing = np.r_[np.zeros(len(rows), bool), np.ones(len(open_rows), bool)]
-        t, y, mode, acc, vo, sm = samples
-        npair = len(scene.model.pairs)
-        return cls(scene, t, y, mode[:, :npair], acc, vo[:, :npair], sm[:, :npair], Impacts.from_rows(allrows, ongoing),
-                   S.peak_force.copy(), S.peak_tension.copy(), stats)
-
-    # --- layout and raw state ---------------------------------------------------------------------
+    # --- state ----------------------------------------------------------------------------------
     @property
     def layout(self) -> Layout:
         m = self.scene.model
@@ -96,82 +50,77 @@ class Run:
     def base_displacement(self) -> np.ndarray:
         return self.y[:, self.layout.base]
 
-    @cached_property
-    def positions(self) -> np.ndarray:
-        """World positions of the berry centres (n, N, 3), z up: base displacement + hinge + twig."""
-        M = self.scene.model.arrays
-        out = np.zeros((len(self.t), M.berry.shape[0], 3))
-        for k in range(len(self.t)):
-            centres(self.y[k], M, out[k])
-        out[:, :, 0] += self.base_displacement[:, None, 0]
-        out[:, :, 2] += self.base_displacement[:, None, 1]
-        return out
+    @property
+    def mode(self) -> np.ndarray:
+        """(S, P) contact modes: 0 apart, 1 loaded, 2 overlapping but unloaded."""
+        return self.contacts["mode"]
 
     @property
     def active_pairs(self) -> np.ndarray:
         """Pairs in contact at each sample."""
         return (self.mode != 0).sum(axis=1)
 
+    # --- observation ------------------------------------------------------------------------------
     @cached_property
-    def _derived(self) -> tuple[np.ndarray, ...]:
-        n = len(self.t)
+    def observation(self) -> obs.Observation:
         m = self.scene.model
-        p = max(len(m.pairs), 1)
-        force, pen = np.zeros((n, p)), np.zeros((n, p))
-        tension, energy = np.zeros((n, m.n_berries)), np.zeros((n, 5))
-        mode = np.zeros((n, p), dtype=np.int64)
-        vo = np.ones((n, p))
-        sm = np.zeros((n, p), dtype=np.bool_)
-        mode[:, : len(m.pairs)] = self.mode
-        vo[:, : len(m.pairs)] = self.v_onset
-        sm[:, : len(m.pairs)] = self.smooth
-        derived(self.t, np.ascontiguousarray(self.y), mode, np.ascontiguousarray(self.accel), vo, sm, m.arrays,
-                force, pen, tension, energy)
-        return force[:, : len(m.pairs)], pen[:, : len(m.pairs)], tension, energy
+        out = obs.empty(len(self.t), m.n_berries, m.n_dof, len(m.pairs))
+        obs.observe(np.ascontiguousarray(self.y), np.ascontiguousarray(self.contacts), np.ascontiguousarray(self.accel),
+                    m.arrays, out)
+        return out
+
+    @cached_property
+    def ledger(self) -> np.ndarray:
+        """(S, 4) J: physics.layout.LEDGER_TERMS, the energy integrals that ride along in y."""
+        return ledger(self.layout, self.y)
+
+    def snapshot(self) -> catalogue.Snapshot:
+        return catalogue.Snapshot(self.t, self.angles, self.angular_velocities, self.mode != 0, self.accel,
+                                  self.base_displacement, self.ledger, self.totals, self.observation)
 
     @property
     def contact_force(self) -> np.ndarray:
-        return self._derived[0]
+        return self.observation.contact_force
 
     @property
     def penetration(self) -> np.ndarray:
-        return self._derived[1]
+        return self.observation.penetration
 
     @property
-    def pedicel_force(self) -> np.ndarray:
-        return self._derived[2]
+    def pedicel_tension(self) -> np.ndarray:
+        return self.observation.pedicel_tension
+
+    @property
+    def hinge_torque(self) -> np.ndarray:
+        return self.observation.hinge_torque
+
+    @cached_property
+    def positions(self) -> np.ndarray:
+        """World positions of the berry centres (S, N, 3), z up: base displacement + hinge + twig."""
+        s = self.snapshot()
+        return np.stack([catalogue.channel(f"position_{a}").value(s) for a in "xyz"], axis=-1)
 
     # --- energy ledger ------------------------------------------------------------------------------
     @cached_property
     def energy(self) -> dict[str, np.ndarray]:
-        """Energies in the rachis' frame (J). `residual` is what the ledger fails to account for:
-        stored + dissipated − work done by the base − (the same at t = 0)."""
-        e = self._derived[3]
-        lay = self.layout
-        out = {name: e[:, k] for k, name in enumerate(ENERGY_TERMS)}
-        out["dissipated_hinge"] = self.y[:, lay.d_hinge].sum(axis=1)
-        out["dissipated_coupling"] = self.y[:, lay.d_coupling].sum(axis=1)
-        out["dissipated_contact"] = self.y[:, lay.d_contact]
-        out["base_work"] = self.y[:, lay.work]
-        stored = e.sum(axis=1)
-        dissipated = out["dissipated_hinge"] + out["dissipated_coupling"] + out["dissipated_contact"]
-        total = stored + dissipated - out["base_work"]
-        out["stored"] = stored
-        out["residual"] = total - total[0]
-        return out
+        """The energy ledger (J): stored terms, dissipated so far, work done by the base, `stored` and
+        `residual` (stored + dissipated − work − the same at the first sample), from the catalogue."""
+        cols = catalogue.table(self.snapshot(), self.scene.model, only=[c for c in catalogue.CHANNELS
+                                                                          if c.name.startswith("energy_")])
+        return {k.removeprefix("energy_"): v for k, v in cols.items()}
+
+    @property
+    def dissipated(self) -> np.ndarray:
+        """Energy dissipated so far by hinges, couplings and contacts, J."""
+        return self.ledger[:, :3].sum(axis=1)
 
     def ledger_error(self) -> float:
         """Largest ledger residual relative to the largest energy that moved through the system."""
         e = self.energy
-        scale = max(np.max(np.abs(e["stored"])), np.max(np.abs(e["base_work"])),
-                    np.max(e["dissipated_hinge"] + e["dissipated_coupling"] + e["dissipated_contact"]), 1e-300)
+        scale = max(np.max(np.abs(e["stored"])), np.max(np.abs(e["base_work"])), np.max(self.dissipated), 1e-300)
         return float(np.max(np.abs(e["residual"])) / scale)
 
     # --- summary --------------------------------------------------------------------------------
-    @property
-    def collision_count(self) -> int:
-        return len(self.impacts)
-
     def dissipated_per_berry(self) -> np.ndarray:
         """Energy each berry dissipated (J): its hinge, plus half of every contact and coupling it is in."""
         m = self.scene.model
@@ -187,74 +136,43 @@ class Run:
             out[m.pairs[p].j] += 0.5 * d
         return out
 
-    def indicators(self) -> dict[str, Any]:
-        th = self.scene.thresholds
-        imp = self.impacts
-        names = self.scene.model.names
-        overload = [names[i] for i in range(len(names)) if self.peak_tension[i] > th.detachment_force]
-        bruising = (imp.peak_force >= th.bruise_force) | (imp.dissipated >= th.bruise_energy)
-        fatigue = imp.peak_force >= th.fatigue_fraction * th.bruise_force
-        return {
-            "detachment_risk": bool(overload),
-            "berries_over_detachment_force": overload,
-            "n_berries_over_detachment_force": len(overload),
-            "bruising_impacts": int(bruising.sum()),
-            "fatigue_impacts": int(fatigue.sum()),
-            "damage_risk": bool(bruising.any()),
-        }
-
     def summary(self) -> dict[str, Any]:
+        """The catalogue's cluster channels at the end of the run, the berries over the detachment force,
+        impact and per-berry figures, and what the solver did."""
+        th = self.scene.thresholds
+        snap = self.snapshot()
+        last = {c.name: c.value(snap)[-1].item() for c in catalogue.CHANNELS
+                if c.per == "cluster" and c.topic == "summary"}
         imp = self.impacts
         per_berry = self.dissipated_per_berry()
+        names = self.scene.model.names
         return {
-            "t_end": float(self.t[-1]),
-            "samples": len(self.t),
-            "berries": self.scene.model.n_berries,
-            "collision_count": self.collision_count,
-            "peak_contact_force": float(self.peak_force.max()) if self.peak_force.size else 0.0,
-            "peak_pedicel_force": float(self.peak_tension.max()),
+            "t_end": float(self.t[-1]), "samples": len(self.t), "berries": self.scene.model.n_berries,
+            **{k: last[k] for k in ("collision_count", "bruising_impacts", "peak_contact_force", "peak_pedicel_tension",
+                                    "dissipated_energy", "berries_over_detachment_force", "detachment_risk")},
+            "detached_berries": [names[i] for i in np.flatnonzero(detaching(self.peak_tension, th.detachment_force))],
+            "fatigue_impacts": int(fatigue(imp.peak_force, th.bruise_force, th.fatigue_fraction).sum()),
+            "damage_risk": bool(last["bruising_impacts"]),
             "max_impact_energy": float(imp.dissipated.max()) if len(imp) else 0.0,
-            "energy_dissipated": float(self.energy["dissipated_hinge"][-1] + self.energy["dissipated_coupling"][-1]
-                                       + self.energy["dissipated_contact"][-1]),
             "max_dissipated_per_berry": float(per_berry.max()),
             "mean_dissipated_per_berry": float(per_berry.mean()),
             "max_active_pairs": int(self.active_pairs.max()) if len(self.t) else 0,
-            **self.indicators(),
             **{k: v for k, v in self.stats.items() if k in (
                 "method", "steps", "rejected", "rhs_evaluations", "zeno_guard_activations", "wall_time",
                 "degrees_of_freedom", "candidate_pairs", "near_pairs_mean", "near_list_rebuilds")},
         }
 
     @property
+    def collision_count(self) -> int:
+        """Impacts in the run (the catalogue's collision_count at its end)."""
+        return len(self.impacts)
+
+    @property
     def touched_pairs(self) -> list[int]:
         """Pairs that were in contact at some point: the only ones whose columns are not all zero."""
         return sorted(set(self.impacts.pair.tolist()) | set(np.flatnonzero(self.mode.any(axis=0)).tolist()))
 
-    # --- columns for writers ----------------------------------------------------------------------
     def columns(self) -> dict[str, np.ndarray]:
-        """Per angle, per berry, per pair that touched (a cluster has thousands of idle candidate
-        pairs), the cluster's active-pair count and the energy ledger."""
-        m = self.scene.model
-        cols = {"time": self.t}
-        for k, name in enumerate(m.dof_names):
-            cols[f"angle_{name}"] = self.angles[:, k]
-        for k, name in enumerate(m.dof_names):
-            cols[f"angular_velocity_{name}"] = self.angular_velocities[:, k]
-        for i, name in enumerate(m.names):
-            cols[f"pedicel_force_{name}"] = self.pedicel_force[:, i]
-        touched = self.touched_pairs
-        for p in touched:
-            cols[f"contact_force_{m.pair_name(p)}"] = self.contact_force[:, p]
-        for p in touched:
-            cols[f"penetration_{m.pair_name(p)}"] = self.penetration[:, p]
-        pos = self.positions
-        for i, name in enumerate(m.names):
-            cols[f"x_{name}"] = pos[:, i, 0]
-            cols[f"y_{name}"] = pos[:, i, 1]
-            cols[f"z_{name}"] = pos[:, i, 2]
-        cols["base_ax"] = self.accel[:, 0]
-        cols["base_az"] = self.accel[:, 1]
-        cols["active_pairs"] = self.active_pairs
-        for k, v in self.energy.items():
-            cols[f"energy_{k}"] = v
-        return cols
+        """time, then every catalogue channel; per pair only for the pairs that touched (a cluster has
+        thousands of idle candidate pairs)."""
+        return {"time": self.t, **catalogue.table(self.snapshot(), self.scene.model, self.touched_pairs)}

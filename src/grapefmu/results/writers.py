@@ -1,4 +1,4 @@
-"""Write a run to CSV or Parquet. Every writer goes through a temporary file and a rename,
+"""Write a run to CSV or Parquet (grapefmu.write_run picks the writer by file type). Every writer goes through a temporary file and a rename,
 so an interrupted write never leaves a half-written file under the requested name."""
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np
 from ..errors import GrapefmuError
 from .run import Run
 
-CSV_CORE = ("time", "angle_", "angular_velocity_", "pedicel_force_", "contact_force_", "penetration_")
+CSV_CORE = ("time", "angle_", "angular_velocity_", "pedicel_tension_", "contact_force_", "penetration_")
 
 
 @contextlib.contextmanager
@@ -54,16 +54,3 @@ def write_parquet(run: Run, path: str | Path) -> None:
     table = pa.table({k: pa.array(v) for k, v in cols.items()}).replace_schema_metadata(meta)
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp)
-
-
-def write_run(run: Run, path: str | Path) -> None:
-    suffix = Path(path).suffix.lower()
-    if suffix == ".csv":
-        write_csv(run, path)
-    elif suffix == ".parquet":
-        write_parquet(run, path)
-    elif suffix == ".mcap":
-        from ..recording.mcap_writer import write_mcap
-        write_mcap(run, path)
-    else:
-        raise GrapefmuError(f"--out: unknown file type {suffix!r}; use .csv, .parquet or .mcap")

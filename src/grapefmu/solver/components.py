@@ -13,9 +13,12 @@ from dataclasses import replace
 import numpy as np
 
 from ..model.model import ContactPair, Coupling, Model, Scene
+from ..errors import SolverError
+from ..physics.forces import CONTACT
 from ..physics.layout import layout
-from ..results.run import Impacts, Run
-from . import core
+from ..results.impacts import Impacts
+from ..results.records import TOTALS, concat
+from ..results.run import Run
 
 
 def groups(model: Model) -> list[list[int]]:
@@ -44,7 +47,7 @@ def sub_scene(scene: Scene, members: list[int]) -> Scene:
     new = {old: k for k, old in enumerate(members)}
     pairs = tuple(ContactPair(new[p.i], new[p.j], p.law) for p in m.pairs if p.i in new)
     couplings = tuple(Coupling(new[c.i], new[c.j], c.stiffness, c.damping) for c in m.couplings if c.i in new)
-    dof = m.arrays.dof
+    dof = m.dof
     idx = [k for i in members for k in range(dof[i], dof[i + 1])]
     model = Model(tuple(m.berries[i] for i in members), pairs, couplings, m.gravity)
     return replace(scene, model=model, angles=tuple(scene.angles[k] for k in idx),
@@ -66,23 +69,23 @@ def run_by_group(scene: Scene, simulate_one: Callable[[Scene, float, float], Run
 
 
 def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
+    """One Run of the whole scene from the runs of its groups (all sampled on the same grid)."""
     m = scene.model
     lay = layout(m.n_berries, m.n_dof, len(m.couplings))
     t = runs[0].t
-    y = np.zeros((len(t), lay.size))
-    npair = len(m.pairs)
-    mode = np.zeros((len(t), npair), dtype=np.int64)
-    v_onset = np.zeros((len(t), npair))
-    smooth = np.zeros((len(t), npair), dtype=bool)
+    n, npair = len(t), len(m.pairs)
+    y = np.zeros((n, lay.size))
+    contacts = np.zeros((n, npair), dtype=CONTACT)
+    totals = np.zeros(n, dtype=TOTALS)
+    totals["peak_pedicel_tension"] = -np.inf
     peak_force, peak_tension = np.zeros(npair), np.zeros(m.n_berries)
     pair_index = {(p.i, p.j): k for k, p in enumerate(m.pairs)}
     coup_index = {(c.i, c.j): k for k, c in enumerate(m.couplings)}
-    dof = m.arrays.dof
-    rows = []
-    ongoing = []
+    dof = m.dof
+    finished, ongoing = [], []
     for members, run in zip(parts, runs):
-        if len(run.t) != len(t) or not np.array_equal(run.t, t):
-            raise RuntimeError("groups were sampled on different grids")  # same scene settings: cannot happen
+        if len(run.t) != n or not np.array_equal(run.t, t):
+            raise SolverError("groups were sampled on different grids")  # same scene settings: cannot happen
         sl = run.layout
         idx = np.array([k for i in members for k in range(dof[i], dof[i + 1])], dtype=int)
         y[:, lay.q.start + idx] = run.y[:, sl.q]
@@ -96,14 +99,17 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
         y[:, lay.base] = run.y[:, sl.base]
         glob = np.array([pair_index[(members[p.i], members[p.j])] for p in run.scene.model.pairs], dtype=int)
         if len(glob):
-            mode[:, glob], v_onset[:, glob], smooth[:, glob] = run.mode, run.v_onset, run.smooth
+            contacts[:, glob] = run.contacts
             peak_force[glob] = run.peak_force
         peak_tension[members] = run.peak_tension
-        imp = run.impacts
-        for k in range(len(imp)):  # in core.I_* column order
-            rows.append([glob[imp.pair[k]], imp.onset[k], imp.end[k], imp.approach_speed[k], imp.peak_force[k],
-                         imp.peak_time[k], imp.impulse[k], imp.dissipated[k], imp.separation_speed[k]])
-            ongoing.append(imp.ongoing[k])
+        for f in ("collision_count", "bruising_impacts", "berries_over_detachment_force"):
+            totals[f] += run.totals[f]
+        for f in ("peak_contact_force", "peak_pedicel_tension"):
+            totals[f] = np.maximum(totals[f], run.totals[f])
+        rec = run.impacts.records()
+        rec["pair"] = glob[rec["pair"]] if len(rec) else rec["pair"]
+        finished.append(rec[~run.impacts.ongoing])
+        ongoing.append(rec[run.impacts.ongoing])
     stats = dict(runs[0].stats)
     for key in ("steps", "rejected", "rhs_evaluations", "switches", "impacts", "zeno_guard_activations",
                 "degrees_of_freedom", "candidate_pairs", "near_list_rebuilds", "wall_time", "segments"):
@@ -112,7 +118,5 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
     if all("near_pairs_mean" in r.stats for r in runs):
         stats["near_pairs_mean"] = sum(r.stats["near_pairs_mean"] * r.stats["steps"] for r in runs) / max(stats["steps"], 1)
     stats["groups"] = len(parts)
-    table = np.array(rows, dtype=float).reshape(-1, core.IMPACT_COLUMNS)
-    impacts = Impacts.from_rows(table, np.array(ongoing, dtype=bool))
-    return Run(scene, t, y, mode, runs[0].accel, v_onset, smooth, impacts, peak_force, peak_tension, stats)
-
+    impacts = Impacts.from_records(concat(finished), concat(ongoing))
+    return Run(scene, t, y, contacts, runs[0].accel, totals, impacts, peak_force, peak_tension, stats)

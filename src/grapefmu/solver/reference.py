@@ -18,32 +18,29 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import minimize_scalar
 
 from ..errors import SolverError
+from ..model.contact import HC_MIN_APPROACH_SPEED
 from ..model.model import Scene
-from ..physics.dynamics import HC_MIN_APPROACH_SPEED, base_accel, pair_force, rhs
+from ..physics.damage import bruising, detaching
+from ..physics.dynamics import rhs
+from ..physics.excitation import base_accel, held
+from ..physics.compiled import jit
+from ..physics.forces import CONTACT, pair_force
+from ..physics.kinematics import pair_state, workspace
 from ..physics.layout import layout
-from . import core
+from ..results.impacts import IMPACT, Impacts
+from ..results.records import TOTALS
+from ..results.run import Run
+from .events import EV_DELTA, EV_PHI, classify, value_at, watched
 
 # new mode after (old mode, function, direction of sign·function turning positive)
-TRANSITION = {(0, core.EV_DELTA): 1, (1, core.EV_DELTA): 0, (1, core.EV_PHI): 2, (2, core.EV_DELTA): 0,
-              (2, core.EV_PHI): 1}
+TRANSITION = {(0, EV_DELTA): 1, (1, EV_DELTA): 0, (1, EV_PHI): 2, (2, EV_DELTA): 0, (2, EV_PHI): 1}
 MAX_SEGMENTS = 200_000
 MAX_STEP = 5e-4  # s: every switch that lasts longer than this is seen
-
-
-class _State:
-    """The discrete state carried between segments: each pair's mode and Hunt–Crossley onset speed."""
-
-    def __init__(self, npair: int):
-        self.mode = np.zeros(npair, dtype=np.int64)
-        self.v_onset = np.full(npair, HC_MIN_APPROACH_SPEED)
-        self.smooth = np.zeros(npair, dtype=np.bool_)
 
 
 def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float | None = None,
                        atol: float | None = None, output_interval: float | None = None,
                        integrator: str = "DOP853", max_step: float = MAX_STEP):
-    from ..results.run import Impacts, Run
-
     s = scene.solver
     t_end = s.t_end if t_end is None else float(t_end)
     rtol = s.rtol if rtol is None else rtol
@@ -55,19 +52,24 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     lay = layout(m.n_berries, m.n_dof, len(m.couplings))
     npair = len(m.pairs)
     ny = lay.size
-    st = _State(npair)
+    st = np.zeros(npair, dtype=CONTACT)
+    st["v_onset"] = HC_MIN_APPROACH_SPEED
+    W = workspace(M)
+    kin = W.berry
+    every = np.arange(npair)
+    scene_input = held(on=False)
     rows, open_imp = [], {}
     # the reference integrates each pair's impulse and dissipation as extra ODE components, which
     # rhs fills when dy has room for them (the event solver uses quadrature), so the two check each other
     y = np.zeros(ny + 2 * npair)
     y[: 2 * lay.d] = scene.initial_state
     for p in range(npair):
-        st.mode[p], ddot = core.classify(p, y, M, st.v_onset, 0)
-        if st.mode[p] != 0:
+        st["mode"][p], ddot = classify(p, y, M, st, kin, 0)
+        if st["mode"][p] != 0:
             open_imp[p] = [0.0, ddot, 0.0, 0.0, 0.0, 0.0]
     breaks = [b for b in X.breaks if 0 < b < t_end] + [t_end]
     grid = np.linspace(0.0, t_end, int(round(t_end / dt_out)) + 1)
-    out_t, out_y, out_mode, out_acc, out_vo = [], [], [], [], []
+    out_t, out_y, out_contacts, out_acc = [], [], [], []
     peak_force = np.zeros(npair)
     dy = np.zeros(ny + 2 * npair)
     nfev = 0
@@ -77,12 +79,12 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     segments = 0
 
     def f(tt, yy):
-        rhs(tt, seg_start_piece, yy, dy, st.mode, st.v_onset, st.smooth, M, X.kind, X.par, X.table)
+        rhs(tt, seg_start_piece, yy, dy, st, M, X, scene_input, W, every, npair)
         return dy.copy()
 
     def make_event(p, fn, sign, t_seg):
         def ev(tt, yy):
-            v = core.event_value(fn, sign, p, yy, M, st.v_onset)
+            v = value_at(fn, sign, p, yy, M, st, kin)
             return min(v, -1e-300) if tt - t_seg < 1e-12 else v
         ev.terminal = True
         ev.direction = 1.0
@@ -96,7 +98,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
         seg_start_piece = t
         events, labels = [], []
         for p in range(npair):
-            na, f1, s1, f2, s2 = core.active_events(st.mode[p], M.pair_law[p], M.pair_par[p])
+            na, f1, s1, f2, s2 = watched(st["mode"][p], M.pair["law"][p], M.pair["clamp"][p])
             for a in range(na):
                 fn, sg = (f1, s1) if a == 0 else (f2, s2)
                 events.append(make_event(p, fn, sg, t))
@@ -118,13 +120,12 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
             yy = sol.sol(seg_grid).T
             out_t.append(seg_grid)
             out_y.append(yy)
-            out_mode.append(np.repeat(st.mode[None, :], len(seg_grid), axis=0))
-            out_vo.append(np.repeat(st.v_onset[None, :], len(seg_grid), axis=0))
-            out_acc.append(np.array([base_accel(X.kind, X.par, X.table, tg, t) for tg in seg_grid]).reshape(-1, 2))
+            out_contacts.append(np.repeat(st[None, :], len(seg_grid), axis=0))
+            out_acc.append(np.array([base_accel(X, tg, t) for tg in seg_grid]).reshape(-1, 2))
         for p in range(npair):
-            if st.mode[p] == 1 and t_new > t:
+            if st["mode"][p] == 1 and t_new > t:
                 def neg_force(tt, p=p):
-                    return -pair_force(p, sol.sol(tt), st.mode, st.v_onset, st.smooth, M)[0]
+                    return -_force(sol.sol(tt), M, p, st, kin)
                 ts = np.linspace(t, t_new, 65)
                 fs = -np.array([neg_force(tt) for tt in ts])
                 k = int(np.argmax(fs))
@@ -135,38 +136,56 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
                     if -r.fun > best:
                         best, tbest = -r.fun, r.x
                 peak_force[p] = max(peak_force[p], best)
-                if p in open_imp and best > open_imp[p][core.O_PEAK]:
-                    open_imp[p][core.O_PEAK] = best
-                    open_imp[p][core.O_TPEAK] = tbest
+                if p in open_imp and best > open_imp[p][2]:
+                    open_imp[p][2] = best
+                    open_imp[p][3] = tbest
         y = sol.sol(t_new) if hit else sol.y[:, -1]
         t = t_new
         if hit:
             p, fn = labels[hit[0]]
-            old = int(st.mode[p])
+            old = int(st["mode"][p])
             new = TRANSITION[(old, fn)]
-            _, ddot, _, _ = _kin(y, M, p)
+            ddot = _delta_dot(y, M, p, kin)
             o_j, o_d = ny + p, ny + npair + p
             if old == 0:
-                st.v_onset[p] = max(ddot, HC_MIN_APPROACH_SPEED)
+                st["v_onset"][p] = max(ddot, HC_MIN_APPROACH_SPEED)
                 open_imp[p] = [t, ddot, 0.0, t, y[o_j], y[o_d]]
             elif new == 0:
                 o = open_imp.pop(p)
                 rows.append([p, o[0], t, o[1], o[2], o[3], y[o_j] - o[4], y[o_d] - o[5], -ddot])
-            st.mode[p] = new
+            st["mode"][p] = new
     wall = time.perf_counter() - wall
     for p, o in open_imp.items():
         rows.append([p, o[0], t, o[1], o[2], o[3], y[ny + p] - o[4], y[ny + npair + p] - o[5], math.nan])
-    ongoing = np.r_[np.zeros(len(rows) - len(open_imp), bool), np.ones(len(open_imp), bool)]
+    th = scene.thresholds
+    table = np.zeros(len(rows), dtype=IMPACT)
+    for k, r in enumerate(rows):
+        table[k] = (*r, bruising(r[4], r[7], th.bruise_force, th.bruise_energy))
+    n_open = len(open_imp)
+    impacts = Impacts.from_records(table[: len(rows) - n_open], table[len(rows) - n_open:])
     tt = np.concatenate(out_t)
-    run = Run(scene, tt, np.concatenate(out_y)[:, :ny], np.concatenate(out_mode).reshape(len(tt), -1)[:, :npair],
-              np.concatenate(out_acc), np.concatenate(out_vo).reshape(len(tt), -1)[:, :npair],
-              np.zeros((len(tt), npair), dtype=bool), Impacts.from_rows(np.array(rows).reshape(-1, 9), ongoing),
-              peak_force, np.zeros(m.n_berries),
+    run = Run(scene, tt, np.concatenate(out_y)[:, :ny], np.concatenate(out_contacts).reshape(len(tt), npair),
+              np.concatenate(out_acc), np.zeros(len(tt), dtype=TOTALS),
+              impacts, peak_force, np.zeros(m.n_berries),
               {"method": f"reference ({integrator})", "rhs_evaluations": nfev, "segments": segments, "wall_time": wall})
-    run.peak_tension = run.pedicel_force.max(axis=0)
+    # totals from the samples and the impact book (the reference keeps no running book of its own)
+    tension = np.maximum.accumulate(run.pedicel_tension, axis=0)
+    run.peak_tension = tension[-1]
+    run.totals["collision_count"] = np.searchsorted(np.sort(impacts.onset), tt, side="right")
+    run.totals["bruising_impacts"] = [np.count_nonzero(impacts.bruising & (impacts.onset <= x)) for x in tt]
+    run.totals["berries_over_detachment_force"] = detaching(tension, th.detachment_force).sum(axis=1)
+    run.totals["peak_pedicel_tension"] = tension.max(axis=1)
+    run.totals["peak_contact_force"] = np.maximum.accumulate(run.contact_force.max(axis=1, initial=0.0))
     return run
 
 
-def _kin(y, M, p):
-    from ..physics.dynamics import pair_kinematics
-    return pair_kinematics(y, M, M.pair_idx[p, 0], M.pair_idx[p, 1], M.dof[M.berry.shape[0]])[:4]
+@jit
+def _force(y, M, p, contacts, kin):
+    pr = M.pair[p]
+    delta, delta_dot, _, _, _ = pair_state(y, M, pr, kin)
+    return pair_force(pr, contacts[p], delta, delta_dot)[0]
+
+
+@jit
+def _delta_dot(y, M, p, kin):
+    return pair_state(y, M, M.pair[p], kin)[1]

@@ -60,7 +60,7 @@ def _execute(spec: SweepSpec, runs: list[dict], todo: list[int], workers: int | 
         try:
             from distributed import Client, wait
         except ImportError as e:
-            raise GrapefmuError(f"--scheduler needs Dask distributed (pip install 'grapefmu[dask]'): {e}") from None
+            raise GrapefmuError(f"scheduler: a Dask scheduler needs Dask distributed (pip install 'grapefmu[dask]'): {e}") from None
         with Client(scheduler) as client:
             submit = lambda k: client.submit(run_one, k, scene_doc(spec, runs[k]), base_dir,  # noqa: E731
                                              key=f"grapefmu-run-{spec.fingerprint}-{k}", pure=False)

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SceneError
-from ..model import validate as v
+from ..scenefile import validate as v
 
 KEY_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+|\*)\])?")
 SPEC_KEYS = {"scene", "mode", "samples", "seed", "parameters"}

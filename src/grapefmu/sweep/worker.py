@@ -8,16 +8,21 @@ from typing import Any
 from ..errors import GrapefmuError
 
 #: the row's result columns, in order (inputs come first, one column per swept key)
-RESULT_COLUMNS = ("status", "collision_count", "peak_contact_force_n", "peak_pedicel_force_n",
-                  "n_berries_over_detachment_force", "detachment_risk", "bruising_impacts", "fatigue_impacts",
-                  "max_impact_energy_j", "energy_dissipated_j", "max_dissipated_per_berry_j", "max_active_pairs",
-                  "steps", "wall_time_s")
+#: summary key -> column (units as suffixes); status and wall_time_s are the row's own
+SUMMARY_COLUMNS = {"collision_count": "collision_count", "peak_contact_force": "peak_contact_force_n",
+                   "peak_pedicel_tension": "peak_pedicel_tension_n",
+                   "berries_over_detachment_force": "berries_over_detachment_force",
+                   "detachment_risk": "detachment_risk", "bruising_impacts": "bruising_impacts",
+                   "fatigue_impacts": "fatigue_impacts", "max_impact_energy": "max_impact_energy_j",
+                   "dissipated_energy": "dissipated_energy_j", "max_dissipated_per_berry": "max_dissipated_per_berry_j",
+                   "max_active_pairs": "max_active_pairs", "steps": "steps"}
+RESULT_COLUMNS = ("status", *SUMMARY_COLUMNS.values(), "wall_time_s")
 
 
 def run_one(run_id: int, doc: dict[str, Any], base_dir: str) -> dict[str, Any]:
     """Simulate one scene document; a scene the validator refuses, or a run the solver cannot finish,
     becomes a row whose status says why (nothing is lost, the sweep goes on)."""
-    from ..model.scene import scene_from_dict
+    from ..scenefile import scene_from_dict
     from ..solver.api import simulate
 
     row: dict[str, Any] = {"run_id": run_id}
@@ -30,12 +35,6 @@ def run_one(run_id: int, doc: dict[str, Any], base_dir: str) -> dict[str, Any]:
         row["wall_time_s"] = time.perf_counter() - wall
         return row
     s = run.summary()
-    row.update({"status": "ok", "collision_count": s["collision_count"], "peak_contact_force_n": s["peak_contact_force"],
-                "peak_pedicel_force_n": s["peak_pedicel_force"],
-                "n_berries_over_detachment_force": s["n_berries_over_detachment_force"],
-                "detachment_risk": s["detachment_risk"], "bruising_impacts": s["bruising_impacts"],
-                "fatigue_impacts": s["fatigue_impacts"], "max_impact_energy_j": s["max_impact_energy"],
-                "energy_dissipated_j": s["energy_dissipated"], "max_dissipated_per_berry_j": s["max_dissipated_per_berry"],
-                "max_active_pairs": s["max_active_pairs"], "steps": s["steps"],
+    row.update({"status": "ok", **{col: s[key] for key, col in SUMMARY_COLUMNS.items()},
                 "wall_time_s": time.perf_counter() - wall})
     return row

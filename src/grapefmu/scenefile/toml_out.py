@@ -6,6 +6,8 @@ import json
 import math
 from typing import Any
 
+from ..errors import GrapefmuError
+
 
 def _value(v: Any) -> str:
     if isinstance(v, bool):
@@ -24,7 +26,7 @@ def _value(v: Any) -> str:
         return "[" + ", ".join(_value(x) for x in v) + "]"
     if isinstance(v, dict):
         return "{ " + ", ".join(f"{k} = {_value(x)}" for k, x in v.items()) + " }"
-    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+    raise GrapefmuError(f"cannot write {type(v).__name__} {v!r} to a scene TOML")
 
 
 def dumps(doc: dict[str, Any]) -> str:

@@ -10,10 +10,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import SceneError
-from . import excitation as exc
+from ..model import excitation as exc
 from . import validate as v
-from .contact import LAWS, ContactLaw, hertz_stiffness, hunt_crossley_chi, kelvin_voigt_damping
-from .model import Berry, ContactPair, Coupling, Model, Scene, SolverSettings, Thresholds
+from ..model.contact import LAWS, ContactLaw, hertz_stiffness, hunt_crossley_chi, kelvin_voigt_damping
+from ..model.model import Berry, ContactPair, Coupling, Model, Scene, SolverSettings, Thresholds
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
 #: The largest initial overlap accepted, as a fraction of the smaller radius: beyond it the
@@ -337,7 +337,7 @@ def _thresholds(raw: Any) -> Thresholds:
 
 def _check_overlap(model: Model, angles: list[float], names: list[str]) -> None:
     """Reject starts (or hanging rest states) that overlap far beyond what a contact law can mean."""
-    from ..physics.dynamics import centres
+    from ..physics.kinematics import penetrations
 
     M = model.arrays
     nd = model.n_dof
@@ -345,12 +345,11 @@ def _check_overlap(model: Model, angles: list[float], names: list[str]) -> None:
     if model.planar:
         states.append(("hanging rest", np.zeros(2 * nd)))
     for label, y in states:
-        pos = np.zeros((model.n_berries, 3))
-        centres(y, M, pos)
-        for pr in model.pairs:
+        delta = np.zeros(len(model.pairs))
+        penetrations(y, M, delta)
+        for pr, overlap in zip(model.pairs, delta):
             bi, bj = model.berries[pr.i], model.berries[pr.j]
             bound = MAX_OVERLAP_FRACTION * min(bi.radius, bj.radius)
-            overlap = bi.radius + bj.radius - float(np.linalg.norm(pos[pr.j] - pos[pr.i]))
             if overlap > bound:
                 raise SceneError(
                     f"berries[{pr.j}].hinge_x" if label == "hanging rest" else f"berries[{pr.j}].angle",

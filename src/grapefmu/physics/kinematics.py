@@ -1,0 +1,131 @@
+"""Stage 1, kinematics (docs/model.md §1): twig directions, berry positions and velocities,
+and the gap of a contact pair, each computed once per evaluation into a `Workspace`.
+
+A planar berry has one angle s (its swing in the x–z plane); a spherical one has swing s and tilt t
+in its twig's own frame, turned by the azimuth ψ about z:
+
+    u_local = (sin s, −sin t cos s, −cos t cos s),  u = R_z(ψ) u_local,  p = h + l u,  ṗ = l u̇.
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from .compiled import inline, jit
+
+#: what stage 1 (and stage 2's force) computes per berry, rachis frame
+KINEMATICS = np.dtype([(f, "f8") for f in (
+    "sin_s", "cos_s", "sin_t", "cos_t",   # of swing s and tilt t (t = 0 for a planar berry)
+    "ux", "uy", "uz",                     # twig direction u
+    "dux", "duy", "duz",                  # u̇, 1/s
+    "px", "py", "pz",                     # position p = h + l u, m
+    "vx", "vy", "vz",                     # velocity ṗ = l u̇, m/s
+    "fx", "fy", "fz")],                   # F: every force on the berry but its hinge's, N (stage 2)
+    align=True)
+#: what stage 2 computes per evaluated pair
+PAIR_FORCE = np.dtype([("force", "f8"), ("power", "f8")])   # normal force N, dissipation (F − F_el) δ̇ W
+
+
+class Workspace(NamedTuple):
+    """What one evaluation's stages compute, each once (MuJoCo's mjData quantities of one forward pass)."""
+
+    berry: np.ndarray           # (N,) KINEMATICS
+    torque: np.ndarray          # (D,) generalized forces Q, N·m
+    pair: np.ndarray            # (P,) PAIR_FORCE of the k-th evaluated pair
+    coupling_power: np.ndarray  # (C,) c3 ṡ² of each coupling, W
+
+
+@jit
+def workspace(M) -> Workspace:
+    return Workspace(np.zeros(M.berry.shape[0], dtype=KINEMATICS), np.zeros(M.n_dof),
+                     np.zeros(M.pair.shape[0], dtype=PAIR_FORCE), np.zeros(M.coupling.shape[0]))
+
+
+@inline
+def berry_kinematics(y, nd, b, k):
+    """§1 for berry b (a BERRY record): trig, u, u̇, p and ṗ into k (a KINEMATICS record) from its angles
+    and rates in y = [q (nd) | q̇ (nd) | ...]."""
+    o = b.dof
+    s, sd = y[o], y[nd + o]
+    ss, cs = math.sin(s), math.cos(s)
+    if b.n_angles == 1:
+        st, ct = 0.0, 1.0
+        ux, uy, uz = ss, 0.0, -cs
+        vx, vy, vz = cs * sd, 0.0, ss * sd
+    else:
+        t, td = y[o + 1], y[nd + o + 1]
+        st, ct = math.sin(t), math.cos(t)
+        lx, ly, uz = ss, -st * cs, -ct * cs
+        wx, wy, vz = cs * sd, st * ss * sd - ct * cs * td, ct * ss * sd + st * cs * td
+        ca, sa = b.azimuth_cos, b.azimuth_sin
+        ux, uy = ca * lx - sa * ly, sa * lx + ca * ly
+        vx, vy = ca * wx - sa * wy, sa * wx + ca * wy
+    k.sin_s, k.cos_s, k.sin_t, k.cos_t = ss, cs, st, ct
+    k.ux, k.uy, k.uz = ux, uy, uz
+    k.dux, k.duy, k.duz = vx, vy, vz
+    l = b.twig_length
+    k.px, k.py, k.pz = b.hinge_x + l * ux, b.hinge_y + l * uy, b.hinge_z + l * uz
+    k.vx, k.vy, k.vz = l * vx, l * vy, l * vz
+
+
+@inline
+def kinematics(y, M, kin):
+    """Stage 1 for every berry into kin ((N,) KINEMATICS)."""
+    berry = M.berry
+    for i in range(berry.shape[0]):
+        berry_kinematics(y, M.n_dof, berry[i], kin[i])
+
+
+@inline
+def pair_gap(bi, bj, ki, kj):
+    """§1: penetration δ = r_i + r_j − |p_j − p_i|, its rate δ̇ and the unit normal n from i to j
+    (bi, bj BERRY records; ki, kj their KINEMATICS)."""
+    dx = kj.px - ki.px
+    dy = kj.py - ki.py
+    dz = kj.pz - ki.pz
+    d = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if d > 1e-15:
+        nx, ny, nz = dx / d, dy / d, dz / d
+    else:
+        nx, ny, nz = 1.0, 0.0, 0.0
+    vx = kj.vx - ki.vx
+    vy = kj.vy - ki.vy
+    vz = kj.vz - ki.vz
+    delta = bi.radius + bj.radius - d
+    delta_dot = -(nx * vx + ny * vy + nz * vz)
+    return delta, delta_dot, nx, ny, nz
+
+
+@inline
+def pair_kinematics(M, pr, kin):
+    """pair_gap of pair record pr with stage 1 in kin."""
+    return pair_gap(M.berry[pr.i], M.berry[pr.j], kin[pr.i], kin[pr.j])
+
+
+@inline
+def pair_state(y, M, pr, kin):
+    """Stage 1 for one pair alone (the event search's root finding needs no other berry), then its gap."""
+    berry = M.berry
+    berry_kinematics(y, M.n_dof, berry[pr.i], kin[pr.i])
+    berry_kinematics(y, M.n_dof, berry[pr.j], kin[pr.j])
+    return pair_gap(berry[pr.i], berry[pr.j], kin[pr.i], kin[pr.j])
+
+
+@jit
+def positions(y, M, out):
+    """Berry centres p_i (N, 3) in the rachis frame, for callers outside the compiled core."""
+    kin = np.zeros(M.berry.shape[0], dtype=KINEMATICS)
+    kinematics(y, M, kin)
+    for i in range(kin.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = kin[i].px, kin[i].py, kin[i].pz
+
+
+@jit
+def penetrations(y, M, out):
+    """δ of every candidate pair (P,) at state y (negative: apart), for callers outside the compiled core."""
+    kin = np.zeros(M.berry.shape[0], dtype=KINEMATICS)
+    kinematics(y, M, kin)
+    for p in range(M.pair.shape[0]):
+        out[p] = pair_kinematics(M, M.pair[p], kin)[0]

@@ -1,0 +1,142 @@
+"""Every ROS 2 message grapefmu records or publishes, built once from the output catalogue.
+
+`state_messages` turns one sample of a `Snapshot` into the messages of every state topic; the MCAP
+writer calls it for every sample of a run and the ROS node for every state it reaches, and both
+serialize through the one typestore (typestore.py). Topics (relative names; frame `rachis`, REP-103:
+x along the rod, y left, z up; docs/ros.md):
+
+  joint_states               sensor_msgs/JointState       twig_<angle>: angle, angular velocity, hinge torque
+  pedicel_tension            sensor_msgs/JointState       twig_<berry>: pedicel tension in effort, N
+  contact/<a>_<b>/wrench     geometry_msgs/WrenchStamped  force on berry b from berry a, N (up to PER_PAIR_LIMIT pairs)
+  contacts                   std_msgs/Float64MultiArray   pair, force, penetration of each pair in contact
+  summary                    std_msgs/Float64MultiArray   time and the catalogue's summary channels
+  collision_events           std_msgs/Float64MultiArray   one message per finished impact
+  rachis/accel               geometry_msgs/AccelStamped   the rachis acceleration (a_x, a_z) in linear.x, linear.z
+  markers                    visualization_msgs/MarkerArray  rachis, twigs, berries and contact forces, frame `world`
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.model import Model
+from ..results import catalogue
+from ..results.impacts import Impacts
+from .stamps import to_ns
+from .typestore import header, msg
+
+FRAME = "rachis"
+WORLD = "world"
+CONTACT_FIELDS = ("pair_index", "contact_force", "penetration")
+IMPACT_FIELDS = ("pair", "onset", "end", "approach_speed", "separation_speed", "peak_force", "peak_time", "impulse",
+                 "dissipated", "bruising")
+#: the summary topic's fields, in order
+SUMMARY_FIELDS = ("time", *(c.name for c in catalogue.on_topic("summary")))
+#: the type of every topic this module builds
+TOPIC_TYPES = {
+    "joint_states": "sensor_msgs/msg/JointState", "pedicel_tension": "sensor_msgs/msg/JointState",
+    "contacts": "std_msgs/msg/Float64MultiArray", "summary": "std_msgs/msg/Float64MultiArray",
+    "collision_events": "std_msgs/msg/Float64MultiArray", "rachis/accel": "geometry_msgs/msg/AccelStamped",
+    "rachis/accel_applied": "geometry_msgs/msg/AccelStamped", "markers": "visualization_msgs/msg/MarkerArray",
+    "/clock": "rosgraph_msgs/msg/Clock", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+    "rachis/pose": "geometry_msgs/msg/PoseStamped",
+}
+WRENCH = "geometry_msgs/msg/WrenchStamped"
+
+
+def wrench_topics(model: Model) -> list[str]:
+    """One wrench topic per pair, for scenes with up to PER_PAIR_LIMIT pairs (a cluster gets `contacts` only)."""
+    if len(model.pairs) > catalogue.PER_PAIR_LIMIT:
+        return []
+    return [f"contact/{model.pair_name(p)}/wrench" for p in range(len(model.pairs))]
+
+
+def topic_type(topic: str) -> str:
+    return WRENCH if topic.endswith("/wrench") else TOPIC_TYPES[topic]
+
+
+def labelled(labels, values, rows: int = 1):
+    """Float64MultiArray of `rows` rows of len(labels) fields, the field names in the dimension label."""
+    return msg("std_msgs/msg/Float64MultiArray", layout={"dim": [{"label": ",".join(labels), "size": rows,
+                                                                  "stride": len(labels)}], "data_offset": 0},
+               data=np.asarray(values, dtype=float).reshape(-1))
+
+
+def accel(ns: int, a, topic: str = "rachis/accel"):
+    return topic, msg("geometry_msgs/msg/AccelStamped", header=header(ns, FRAME),
+                      accel={"linear": {"x": float(a[0]), "y": 0.0, "z": float(a[1])}})
+
+
+def clock(ns: int):
+    return "/clock", msg("rosgraph_msgs/msg/Clock", clock=header(ns).stamp)
+
+
+def state_messages(model: Model, snap: catalogue.Snapshot, k: int, ns: int, *, markers: bool = False) -> list:
+    """(topic, message) of every state topic at sample k of snap, stamped ns."""
+    obs = snap.observation
+    dof_joints = [f"twig_{n}" for n in model.dof_names]
+    out = [("joint_states", msg("sensor_msgs/msg/JointState", header=header(ns, FRAME), name=dof_joints,
+                                position=snap.angles[k], velocity=snap.angular_velocities[k],
+                                effort=obs.hinge_torque[k])),
+           ("pedicel_tension", msg("sensor_msgs/msg/JointState", header=header(ns, FRAME),
+                                   name=[f"twig_{n}" for n in model.names], effort=obs.pedicel_tension[k]))]
+    force, normal = obs.contact_force[k], obs.contact_normal[k]
+    for p, topic in enumerate(wrench_topics(model)):
+        f = force[p] * normal[p]
+        out.append((topic, msg(WRENCH, header=header(ns, FRAME),
+                               wrench={"force": {"x": f[0], "y": f[1], "z": f[2]}})))
+    touching = np.flatnonzero(snap.in_contact[k])
+    out.append(("contacts", labelled(CONTACT_FIELDS, np.column_stack(
+        [touching, force[touching], obs.penetration[k, touching]]), rows=len(touching))))
+    out.append(("summary", labelled(SUMMARY_FIELDS, [snap.t[k], *(
+        float(np.asarray(c.value(snap))[k]) for c in catalogue.on_topic("summary"))])))
+    if markers:
+        out.append(("markers", marker_array(model, snap, k, ns)))
+    return out
+
+
+def impact_messages(impacts: Impacts) -> list:
+    """(end time in ns, "collision_events", message) of every impact, fields named in IMPACT_FIELDS."""
+    rec = impacts.records()
+    return [(to_ns(float(r["end"])), "collision_events",
+             labelled(IMPACT_FIELDS, [float(r[f]) for f in IMPACT_FIELDS])) for r in rec]
+
+
+def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_scale: float = 0.02):
+    """Rachis (origin to every hinge), twigs, berries and contact-force lines in the world frame (z up) for
+    Foxglove or RViz: three line lists plus one sphere per berry, however many pairs the cluster has."""
+    M = model.arrays
+    base = snap.base_displacement[k]
+    origin = np.array([base[0], 0.0, base[1]])
+    berries = snap.observation.position[k] + origin
+    hinges = np.column_stack([M.berry["hinge_x"], M.berry["hinge_y"], M.berry["hinge_z"]]) + origin
+
+    def pt(v):
+        return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
+
+    def marker(mid, mtype, ns_, scale, color, points=(), pose=None):
+        return msg("visualization_msgs/msg/Marker", header=header(ns, WORLD), ns=ns_, id=mid, type=mtype, action=0,
+                   pose=pose or {"orientation": {"w": 1.0}}, scale=scale, color=color, points=[pt(p) for p in points])
+    line = 5  # LINE_LIST
+    force = snap.observation.contact_force[k]
+    normal = snap.observation.contact_normal[k]
+    contact_pts = []
+    for p, pr in enumerate(model.pairs):
+        if force[p] > 0.0:
+            mid = (berries[pr.i] + berries[pr.j]) / 2
+            contact_pts += [mid, mid + normal[p] * force[p] * force_scale]
+    arr = [marker(0, line, "rachis", {"x": 0.003}, {"r": 0.4, "g": 0.3, "b": 0.2, "a": 1.0},
+                  [x for h in hinges for x in (origin, h)]),
+           marker(1, line, "twigs", {"x": 0.0015}, {"r": 0.2, "g": 0.6, "b": 0.2, "a": 1.0},
+                  [x for h, b in zip(hinges, berries) for x in (h, b)]),
+           marker(2, line, "contact", {"x": 0.002}, {"r": 0.9, "g": 0.2, "b": 0.1, "a": 1.0}, contact_pts)]
+    for i, (b, r) in enumerate(zip(berries, M.berry["radius"])):
+        arr.append(marker(10 + i, 2, "berries", {"x": 2 * r, "y": 2 * r, "z": 2 * r},
+                          {"r": 0.45, "g": 0.1, "b": 0.5, "a": 0.9}, pose={"position": pt(b), "orientation": {"w": 1.0}}))
+    return msg("visualization_msgs/msg/MarkerArray", markers=arr)
+
+
+def diagnostics(ns: int, level: int, message: str, values: dict):
+    status = msg("diagnostic_msgs/msg/DiagnosticStatus", level=level, name="grapefmu: simulator",
+                 message=message, hardware_id="grapefmu",
+                 values=[{"key": k, "value": str(v)} for k, v in values.items()])
+    return "/diagnostics", msg("diagnostic_msgs/msg/DiagnosticArray", header=header(ns), status=[status])

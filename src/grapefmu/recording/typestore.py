@@ -1,0 +1,177 @@
+"""One type system for every ROS 2 message grapefmu records or publishes: the rosbags ROS 2 Jazzy typestore.
+
+Building, serializing, writing to MCAP and reading back all go through `TYPESTORE`. This way the CDR bytes,
+the ros2msg schema text and the decoder always agree. rclpy.serialization.serialize_message appends
+uninitialised bytes when a message has empty arrays (e.g. JointState, Float64MultiArray), and rosbags rejects
+them with "CDR message size mismatch". Bytes from `serialize` are exact, so rosbags, mcap-ros2-support and rclpy
+(`Publisher.publish(bytes)` on a publisher made with the rclpy class) all accept them. No ROS installation needed.
+"""
+from __future__ import annotations
+
+import operator
+import os
+from contextlib import nullcontext
+from functools import cache
+from typing import IO, Any, Iterator, Mapping
+
+import numpy as np
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+from rosbags.interfaces import Nodetype
+from rosbags.typesys import Stores, get_typestore
+
+from .. import __version__
+from ..errors import RecordingError
+
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+
+# rosbags keeps numeric arrays as numpy arrays and writes their raw memory as they are. A list fails, and an
+# array with the wrong dtype or byte order gives wrong values without any error, so `msg` converts them.
+_DTYPES = {"bool": "bool", "byte": "uint8", "char": "uint8", "octet": "uint8"}
+
+
+def _dtype(desc) -> np.dtype | None:
+    """numpy dtype (little endian) of an array/sequence field descriptor of a numeric base type, else None."""
+    sub = desc[1][0]
+    if sub[0] != Nodetype.BASE or sub[1][0] in ("string", "wstring"):
+        return None
+    return np.dtype(_DTYPES.get(sub[1][0], sub[1][0])).newbyteorder("<")
+
+
+def _default(desc) -> Any:
+    """The ROS default of a field (zero, empty string, empty or zero-filled array, default sub-message)."""
+    kind, detail = desc
+    if kind == Nodetype.BASE:
+        name = detail[0]
+        return "" if name in ("string", "wstring") else False if name == "bool" else 0.0 if "float" in name else 0
+    if kind == Nodetype.NAME:
+        return msg(detail)
+    size = detail[1] if kind == Nodetype.ARRAY else 0
+    dt = _dtype(desc)
+    return np.zeros(size, dt) if dt is not None else [_default(detail[0]) for _ in range(size)]
+
+
+def _coerce(desc, value) -> Any:
+    """Accept plain Python values: dicts for sub-messages, any sequence, array or bytes for numeric arrays."""
+    kind, detail = desc
+    if kind == Nodetype.NAME:
+        return msg(detail, **value) if isinstance(value, Mapping) else value
+    if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+        if (dt := _dtype(desc)) is None:
+            return [_coerce(detail[0], v) for v in value]
+        if isinstance(value, (bytes, bytearray, memoryview)):  # uint8[] data such as MeshFile.data
+            value = np.frombuffer(value, np.uint8)
+        return np.ascontiguousarray(value, dt)
+    name = detail[0]  # scalar: store the Python type that deserialization returns, refuse 1.5 for an integer
+    return value if name in ("string", "wstring") else bool(value) if name == "bool" else \
+        float(value) if "float" in name else operator.index(value)
+
+
+def msg(typename: str, **fields) -> Any:
+    """A `typename` message (e.g. "sensor_msgs/msg/JointState") from TYPESTORE. Omitted fields get their ROS
+    default, because rosbags' dataclasses have no defaults. Sub-messages may be given as dicts."""
+    fdefs = TYPESTORE.fielddefs[typename][1]
+    if unknown := fields.keys() - {name for name, _ in fdefs}:
+        raise RecordingError(f"{typename} has no field(s) {sorted(unknown)}")
+    return TYPESTORE.types[typename](**{name: _coerce(desc, fields[name]) if name in fields else _default(desc)
+                                        for name, desc in fdefs})
+
+
+def stamp(ns: int) -> Any:
+    """builtin_interfaces/msg/Time from integer nanoseconds. Floor division keeps 0 <= nanosec < 1e9,
+    also before the epoch."""
+    ns = int(ns)
+    return TYPESTORE.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def header(ns: int, frame_id: str = "") -> Any:
+    """std_msgs/msg/Header stamped at `ns`."""
+    return TYPESTORE.types["std_msgs/msg/Header"](stamp=stamp(ns), frame_id=frame_id)
+
+
+def serialize(message) -> bytes:
+    """Little-endian CDR, encapsulation header included. This is the byte layout that MCAP "cdr" and rclpy's
+    raw publish use."""
+    return bytes(TYPESTORE.serialize_cdr(message, message.__msgtype__))
+
+
+def deserialize(data: bytes | memoryview, typename: str) -> Any:
+    """Decode CDR bytes into a TYPESTORE message (numeric arrays come back as numpy arrays)."""
+    return TYPESTORE.deserialize_cdr(data, typename)
+
+
+@cache
+def schema(typename: str) -> str:
+    """ros2msg text of `typename` with its dependencies appended as "====\\nMSG: pkg/Name" sections. MCAP's ros2msg
+    schema encoding needs this form, and both rosbags and mcap-ros2-support parse it."""
+    return TYPESTORE.generate_msgdef(typename, ros_version=2)[0]
+
+
+class McapWriter:
+    """MCAP writer with profile "ros2": one ros2msg schema per type, one "cdr" channel per topic, sequence numbers
+    per topic starting at 1 (the MCAP spec uses 0 for "not set"), chunks compressed as mcap's Writer does by
+    default (zstd). Use it as a context manager. It closes the file only if it opened the file."""
+
+    def __init__(self, output: str | os.PathLike | IO[bytes], *, compression: CompressionType = CompressionType.ZSTD,
+                 chunk_size: int = 1 << 20):
+        self._own = open(output, "wb") if isinstance(output, (str, os.PathLike)) else None
+        self._writer = Writer(self._own or output, chunk_size=chunk_size, compression=compression)
+        self._writer.start(profile="ros2", library=f"grapefmu/{__version__} mcap-python")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, tuple[int, str]] = {}
+        self._seq: dict[int, int] = {}
+        self._closed = False
+
+    def _channel(self, topic: str, typename: str) -> int:
+        if (ch := self._channels.get(topic)) is None:
+            if (sid := self._schemas.get(typename)) is None:
+                sid = self._schemas[typename] = self._writer.register_schema(typename, "ros2msg",
+                                                                             schema(typename).encode())
+            ch = self._channels[topic] = (self._writer.register_channel(topic, "cdr", sid), typename)
+        elif ch[1] != typename:
+            raise RecordingError(f"topic {topic!r} carries {ch[1]}, not {typename}")
+        return ch[0]
+
+    def write(self, topic: str, message, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+        """Serialize `message` with `serialize` and append it to `topic`."""
+        self.write_raw(topic, message.__msgtype__, serialize(message), log_time_ns, publish_time_ns)
+
+    def write_raw(self, topic: str, typename: str, data: bytes, log_time_ns: int,
+                  publish_time_ns: int | None = None) -> None:
+        """Append CDR bytes that are already serialized (they should come from `serialize`)."""
+        cid = self._channel(topic, typename)
+        seq = self._seq[cid] = self._seq.get(cid, 0) + 1
+        self._writer.add_message(cid, int(log_time_ns), data,
+                                 int(log_time_ns if publish_time_ns is None else publish_time_ns), seq)
+
+    def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
+        """A metadata record, e.g. the scene and solver settings needed to re-run the simulation."""
+        self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+
+    def close(self) -> None:
+        """Write the summary and the footer (once). Close the file if this writer opened it."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._writer.finish()
+        finally:
+            if self._own is not None:
+                self._own.close()
+
+    def __enter__(self) -> McapWriter:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def read_messages(source: str | os.PathLike | IO[bytes], topics=None) -> Iterator[tuple[str, str, int, Any]]:
+    """Yield (topic, typename, log_time_ns, message) in log-time order, decoded through TYPESTORE and not through the
+    file's schemas. A recording from another ROS distro whose types differ would fail here, and that is on purpose."""
+    opened = open(source, "rb") if isinstance(source, (str, os.PathLike)) else nullcontext(source)
+    with opened as fh:
+        for sch, ch, m in make_reader(fh).iter_messages(topics=topics, log_time_order=True):
+            if sch is None or ch.message_encoding != "cdr":
+                raise RecordingError(f"topic {ch.topic!r} is not a ROS 2 CDR channel")
+            yield ch.topic, sch.name, m.log_time, deserialize(m.data, sch.name)

@@ -1,0 +1,185 @@
+"""The output catalogue: every channel grapefmu reports, defined once.
+
+A channel has a name, a unit, what it is per (angle, berry, pair or the whole cluster), a type, where it
+goes in ROS (topic) and FMI (initial), and how its value follows from a `Snapshot`, the samples of a
+run or the one state a face reports after a step. The FMU's variables, the ROS messages, the MCAP
+recordings, a run's columns (CSV, Parquet) and its summary are all generated from CHANNELS.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from ..model.model import Model
+from ..physics.layout import LEDGER_TERMS
+from ..physics.observe import ENERGY_TERMS, Observation
+from .records import TOTALS
+
+#: a scene with more candidate pairs than this (a cluster) reports pairs only while in contact
+PER_PAIR_LIMIT = 16
+
+
+class Snapshot(NamedTuple):
+    """Samples (leading axis) of everything a channel can be computed from."""
+
+    t: np.ndarray                  # (S,) s
+    angles: np.ndarray             # (S, D) rad
+    angular_velocities: np.ndarray  # (S, D) rad/s
+    in_contact: np.ndarray         # (S, P) bool
+    accel: np.ndarray              # (S, 2) m/s², (a_x, a_z) of the rachis
+    base_displacement: np.ndarray  # (S, 2) m, (x, z) of the rachis from its start
+    ledger: np.ndarray             # (S, 4) J, physics.layout.LEDGER_TERMS: dissipated so far, work done by the base
+    totals: np.ndarray             # (S,) records.TOTALS
+    observation: Observation
+
+
+@dataclass(frozen=True)
+class Channel:
+    name: str
+    unit: str          # SI, as FMI writes it ("" for a count or a flag)
+    per: str           # "angle", "berry", "pair" or "cluster"
+    type: str          # "real", "integer" or "boolean"
+    description: str
+    value: Callable[[Snapshot], np.ndarray]  # (S, count) per angle, berry or pair; (S,) per cluster
+    topic: str | None = None     # the ROS topic that carries it (docs/ros.md)
+    fmu: bool = True             # an FMU variable
+    fmi_causality: str = "output"
+    fmi_initial: str = "exact"   # FMI `initial` of an output
+
+    def element_names(self, model: Model) -> list[str]:
+        if self.per == "angle":
+            return list(model.dof_names)
+        if self.per == "berry":
+            return list(model.names)
+        if self.per == "pair":
+            return [model.pair_name(p) for p in range(len(model.pairs))]
+        return [""]
+
+    def column(self, element: str) -> str:
+        """The one name of this channel's element everywhere (FMU variable, CSV column, plot label)."""
+        return f"{self.name}_{element}" if element else self.name
+
+
+def _world(axis: int) -> Callable[[Snapshot], np.ndarray]:
+    def value(s: Snapshot) -> np.ndarray:
+        base = {0: s.base_displacement[:, 0], 1: 0.0, 2: s.base_displacement[:, 1]}[axis]
+        return s.observation.position[:, :, axis] + np.asarray(base)[..., None]
+    return value
+
+
+def _total(field: str) -> Callable[[Snapshot], np.ndarray]:
+    return lambda s: s.totals[field]
+
+
+def _peak(field: str, now: Callable[[Snapshot], np.ndarray]) -> Callable[[Snapshot], np.ndarray]:
+    """The solver's peak so far (refined on the dense output) or the value now, whichever is larger."""
+    return lambda s: np.maximum(s.totals[field], now(s))
+
+
+def _largest(values: Callable[[Snapshot], np.ndarray]) -> Callable[[Snapshot], np.ndarray]:
+    return lambda s: values(s).max(axis=1, initial=0.0) if values(s).shape[1] else np.zeros(len(s.t))
+
+
+def _balance(s: Snapshot) -> np.ndarray:
+    """stored + dissipated − work done by the base: constant in exact arithmetic."""
+    return s.observation.energy.sum(axis=1) + s.ledger[:, :3].sum(axis=1) - s.ledger[:, 3]
+
+
+_force = lambda s: s.observation.contact_force  # noqa: E731
+_tension = lambda s: s.observation.pedicel_tension  # noqa: E731
+_max_tension = lambda s: _tension(s).max(axis=1)  # noqa: E731
+
+CHANNELS: tuple[Channel, ...] = (
+    Channel("angle", "rad", "angle", "real", "Twig angle (0 hanging; swing and tilt for a spherical twig)",
+            lambda s: s.angles, "joint_states"),
+    Channel("angular_velocity", "rad/s", "angle", "real", "Twig angular velocity", lambda s: s.angular_velocities,
+            "joint_states"),
+    Channel("hinge_torque", "N.m", "angle", "real", "Torque of the viscoelastic hinge on the twig, −k (q − q₀) − c q̇",
+            lambda s: s.observation.hinge_torque, "joint_states", fmu=False),
+    Channel("pedicel_tension", "N", "berry", "real", "Pedicel (twig) tension, positive pulling", _tension,
+            "pedicel_tension"),
+    Channel("position_x", "m", "berry", "real", "Berry centre x, world frame", _world(0), "markers", fmu=False),
+    Channel("position_y", "m", "berry", "real", "Berry centre y, world frame", _world(1), "markers", fmu=False),
+    Channel("position_z", "m", "berry", "real", "Berry centre z (up), world frame", _world(2), "markers", fmu=False),
+    Channel("contact_force", "N", "pair", "real", "Normal contact force between the pair", _force, "contacts"),
+    Channel("penetration", "m", "pair", "real", "Penetration of the pair while in contact",
+            lambda s: s.observation.penetration, "contacts"),
+    Channel("in_contact", "", "pair", "boolean", "True while the pair is in contact", lambda s: s.in_contact, "contacts"),
+    Channel("base_ax", "m/s2", "cluster", "real", "Rachis (gripper) acceleration along x, held over a step",
+            lambda s: s.accel[:, 0], "rachis/accel", fmi_causality="input"),
+    Channel("base_az", "m/s2", "cluster", "real", "Rachis (gripper) acceleration along z (up), held over a step",
+            lambda s: s.accel[:, 1], "rachis/accel", fmi_causality="input"),
+    Channel("active_pairs", "", "cluster", "integer", "Berry pairs in contact now", lambda s: s.in_contact.sum(axis=1),
+            "summary"),
+    Channel("max_contact_force", "N", "cluster", "real", "Largest contact force now", _largest(_force), "summary"),
+    Channel("max_pedicel_tension", "N", "cluster", "real", "Largest pedicel tension now", _max_tension, "summary"),
+    Channel("collision_count", "", "cluster", "integer", "Impacts so far (berry pairs coming into contact)",
+            _total("collision_count"), "summary"),
+    Channel("bruising_impacts", "", "cluster", "integer",
+            "Impacts so far whose peak force or dissipated energy reached the bruise threshold",
+            _total("bruising_impacts"), "summary"),
+    Channel("berries_over_detachment_force", "", "cluster", "integer",
+            "Berries whose pedicel tension has exceeded the detachment force so far",
+            _total("berries_over_detachment_force"), "summary"),
+    Channel("detachment_risk", "", "cluster", "boolean",
+            "True once any pedicel tension has exceeded the scene's detachment force",
+            lambda s: s.totals["berries_over_detachment_force"] > 0, "summary"),
+    Channel("peak_contact_force", "N", "cluster", "real", "Largest contact force so far",
+            _peak("peak_contact_force", _largest(_force)), "summary"),
+    Channel("peak_pedicel_tension", "N", "cluster", "real", "Largest pedicel tension so far",
+            _peak("peak_pedicel_tension", _max_tension), "summary"),
+    Channel("dissipated_energy", "J", "cluster", "real", "Energy dissipated so far by hinges, couplings and contacts",
+            lambda s: s.ledger[:, :3].sum(axis=1), "summary"),
+    *(Channel(f"energy_{k}", "J", "cluster", "real", f"Stored energy: {k.replace('_', ' ')}",
+              lambda s, k=k: s.observation.energy[:, ENERGY_TERMS.index(k)], fmu=False) for k in ENERGY_TERMS),
+    *(Channel(f"energy_{k}", "J", "cluster", "real", f"Energy ledger: {k.replace('_', ' ')} so far",
+              lambda s, k=k: s.ledger[:, LEDGER_TERMS.index(k)], fmu=False) for k in LEDGER_TERMS),
+    Channel("energy_stored", "J", "cluster", "real", "Stored energy: the sum of the stored terms",
+            lambda s: s.observation.energy.sum(axis=1), fmu=False),
+    Channel("energy_residual", "J", "cluster", "real",
+            "What the energy ledger fails to account for since the first sample (docs/model.md §5)",
+            lambda s: _balance(s) - _balance(s)[:1], fmu=False),
+)
+
+BY_NAME = {c.name: c for c in CHANNELS}
+
+
+def channel(name: str) -> Channel:
+    return BY_NAME[name]
+
+
+def on_topic(topic: str) -> list[Channel]:
+    return [c for c in CHANNELS if c.topic == topic]
+
+
+def table(snap: Snapshot, model: Model, pairs: list[int] | None = None,
+          only: list[Channel] | tuple[Channel, ...] = CHANNELS) -> dict[str, np.ndarray]:
+    """Channels (all unless told) as named columns of samples; per-pair channels for `pairs` only (default: all)."""
+    cols: dict[str, np.ndarray] = {}
+    for c in only:
+        v = np.asarray(c.value(snap))
+        if c.per == "cluster":
+            cols[c.name] = v
+            continue
+        names = c.element_names(model)
+        idx = range(len(names)) if c.per != "pair" or pairs is None else pairs
+        for k in idx:
+            cols[c.column(names[k])] = v[:, k]
+    return cols
+
+
+def totals_empty(n: int = 1) -> np.ndarray:
+    return np.zeros(n, dtype=TOTALS)
+
+
+def markdown() -> str:
+    """The catalogue as a Markdown table (docs/outputs.md; `grapefmu outputs`)."""
+    rows = ["| channel | unit | per | type | ROS topic | FMU | description |", "|---|---|---|---|---|---|---|"]
+    for c in CHANNELS:
+        fmu = c.fmi_causality if c.fmu else "—"
+        rows.append(f"| `{c.name}` | {c.unit or '—'} | {c.per} | {c.type} | {c.topic or '—'} | {fmu} | "
+                    f"{c.description} |")
+    return "\n".join(rows) + "\n"

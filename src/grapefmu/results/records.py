@@ -1,0 +1,28 @@
+"""The records a run reports, as the compiled solver writes them: finished impacts, and the totals of
+what the run has done to the berries so far (every face reports the same totals)."""
+from __future__ import annotations
+
+import numpy as np
+
+#: a finished impact, from the pair's first touch (δ = 0, closing) to its separation
+IMPACT = np.dtype([("pair", "i8"), ("onset", "f8"), ("end", "f8"), ("approach_speed", "f8"), ("peak_force", "f8"),
+                   ("peak_time", "f8"), ("impulse", "f8"), ("dissipated", "f8"), ("separation_speed", "f8"),
+                   ("bruising", "?")])
+#: so far: impacts begun, impacts that bruise, berries whose pedicel tension passed the detachment force,
+#: and the largest contact force and pedicel tension (refined on the dense output)
+TOTALS = np.dtype([("collision_count", "i8"), ("bruising_impacts", "i8"), ("berries_over_detachment_force", "i8"),
+                   ("peak_contact_force", "f8"), ("peak_pedicel_tension", "f8")])
+
+
+def concat(arrays) -> np.ndarray:
+    """np.concatenate along the first axis for record arrays of one dtype, through bytes: numpy promotes
+    record dtypes field by field on every call, which costs more than a short run's whole integration."""
+    arrays = [np.ascontiguousarray(a) for a in arrays]
+    dtype, tail = arrays[0].dtype, arrays[0].shape[1:]
+    if not dtype.names:
+        return np.concatenate(arrays)
+    row = dtype.itemsize * int(np.prod(tail))
+    raw = np.concatenate([a.view(np.uint8).reshape(len(a), row) for a in arrays])
+    if row == 0:
+        return np.zeros((len(raw), *tail), dtype)
+    return raw.view(dtype).reshape((len(raw), *tail))

@@ -1,0 +1,92 @@
+"""The broad phase: a Verlet list of the pairs that can touch soon (docs/solver.md).
+
+The list keeps every candidate pair whose gap was below the skin when it was built, and every pair in
+contact; it stays valid while no berry moves skin/2 from where it was. Its validity is checked on
+every step's samples (`reach`), which are also what the event search reads.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..physics.compiled import jit
+from ..physics.kinematics import KINEMATICS, kinematics, pair_kinematics
+from .events import N_SAMPLES
+from .step import dense_head
+
+
+@jit
+def samples_for(M):
+    """The berries at the N_SAMPLES + 1 equally spaced points of a step's dense output: (N_SAMPLES + 1, N)."""
+    return np.zeros((N_SAMPLES + 1, M.berry.shape[0]), dtype=KINEMATICS)
+
+
+@jit
+def rebuild(M, contacts, Bk, B, kin, skin):
+    """Keep the pairs with a gap below `skin` with the berries at kin, and every pair in contact.
+    A smooth law under step-size control is evaluated inline exactly for its near pairs."""
+    nn = 0
+    for p in range(contacts.shape[0]):
+        c = contacts[p]
+        near = -pair_kinematics(M, M.pair[p], kin)[0] < skin or c.mode != 0
+        if Bk.pair[p].smooth_until == np.inf:
+            c.smooth = near
+        if near or c.smooth:
+            B.near[nn] = p
+            nn += 1
+    B.count[0] = nn
+    for i in range(kin.shape[0]):
+        B.reference[i, 0], B.reference[i, 1], B.reference[i, 2] = kin[i].px, kin[i].py, kin[i].pz
+    Bk.counters[0].near_list_rebuilds += 1
+
+
+@jit
+def sample(y0, q, h, M, work, samples):
+    """Fill samples from the step's dense output (stage 1 at every sample point)."""
+    m = 2 * M.n_dof
+    for k in range(N_SAMPLES + 1):
+        dense_head(k / N_SAMPLES, y0, q, h, work, m)
+        kinematics(work, M, samples[k])
+
+
+@jit
+def reach(samples, reference):
+    """How far any berry gets from reference over the step: its samples, plus half the largest chord
+    between samples for the stretch in between."""
+    worst = 0.0
+    for i in range(samples.shape[1]):
+        for k in range(N_SAMPLES + 1):
+            p = samples[k, i]
+            d = math.sqrt((p.px - reference[i, 0]) ** 2 + (p.py - reference[i, 1]) ** 2 + (p.pz - reference[i, 2]) ** 2)
+            if k > 0:
+                o = samples[k - 1, i]
+                d += 0.5 * math.sqrt((p.px - o.px) ** 2 + (p.py - o.py) ** 2 + (p.pz - o.pz) ** 2)
+            worst = max(worst, d)
+    return worst
+
+
+@jit
+def keep_valid(y0, q, h, M, contacts, Bk, B, cfg, work, samples):
+    """Keep the near list valid over this step. Returns how far a berry got from the list's reference
+    (the caller rebuilds after the step once that passes skin/4), or −1: retry shorter.
+
+    Up to skin/2 the list holds for the whole step. Beyond, a pair outside the list could have touched
+    inside this step: with event location the list is rebuilt from the step's start (wide enough for
+    the step) and the events search it; under step-size control the forces of such a pair were
+    missing from the stages, so the step is refused."""
+    if contacts.shape[0] == 0:
+        return 0.0
+    sample(y0, q, h, M, work, samples)
+    far = reach(samples, B.reference)
+    if not math.isfinite(cfg.skin):
+        return 0.0
+    if far <= 0.5 * cfg.skin:
+        return far
+    if cfg.step_control:
+        return -1.0
+    rebuild(M, contacts, Bk, B, samples[0], cfg.skin)
+    far = reach(samples, B.reference)
+    if far > 0.5 * cfg.skin:
+        rebuild(M, contacts, Bk, B, samples[0], 2.0 * far * 1.001)
+    return math.inf  # rebuild again from the committed state

@@ -1,0 +1,247 @@
+"""Contact events (docs/solver.md): which function a pair watches in its mode, where on a step's dense
+output it turns positive, and what a switch changes (mode, impact book, Zeno guard).
+
+An event is where sign·fn turns positive: δ (the gap closes or opens) and φ (the clamped law unloads
+or loads again). Each function is sampled on the step's dense output, so a contact that opens and
+closes inside one step is still seen; a sampled local maximum close to zero is refined, so a graze
+between two samples is not missed.
+"""
+from __future__ import annotations
+
+
+import numpy as np
+
+from ..model.contact import HC_MIN_APPROACH_SPEED, Law
+from ..physics.compiled import inline, jit
+from ..physics.damage import bruising
+from ..physics.forces import pair_law
+from ..physics.kinematics import pair_kinematics, pair_state
+from .step import dense_head
+
+EV_DELTA, EV_PHI = 0, 1
+N_SAMPLES = 4          # sub-intervals per step searched for a sign change (plus local-maximum refinement)
+ROOT_TOL = 1e-13       # s, absolute tolerance of event times
+
+
+@inline
+def event_value(fn, sign, pr, c, delta, delta_dot):
+    """sign·fn of a pair (pr PAIR, c CONTACT record) at penetration δ and rate δ̇."""
+    if fn == EV_DELTA:
+        return sign * delta
+    return sign * pair_law(pr, c.v_onset, delta, delta_dot)[2]
+
+
+@inline
+def watched(mode, law, clamp):
+    """(count, fn1, sign1, fn2, sign2): the functions a pair watches in its mode."""
+    clamped = clamp and law != Law.HERTZ
+    if mode == 0:
+        return 1, EV_DELTA, 1.0, EV_PHI, 0.0
+    if mode == 1:
+        return (2 if clamped else 1), EV_DELTA, -1.0, EV_PHI, -1.0
+    return 2, EV_DELTA, -1.0, EV_PHI, 1.0
+
+
+@jit
+def value_at(fn, sign, p, y, M, contacts, kin):
+    """An event function of pair p at state y."""
+    pr = M.pair[p]
+    delta, delta_dot, _, _, _ = pair_state(y, M, pr, kin)
+    return event_value(fn, sign, pr, contacts[p], delta, delta_dot)
+
+
+@jit
+def classify(p, y, M, contacts, kin, old_mode):
+    """(mode, δ̇): the mode the state is in, 0 apart, 1 loaded, 2 overlapping but unloaded; a pair that
+    was apart is judged with the onset speed it would get now."""
+    pr = M.pair[p]
+    delta, delta_dot, _, _, _ = pair_state(y, M, pr, kin)
+    if delta <= 0.0:
+        return 0, delta_dot
+    vo = contacts[p].v_onset if old_mode != 0 else max(delta_dot, HC_MIN_APPROACH_SPEED)
+    return (1 if pair_law(pr, vo, delta, delta_dot)[2] > 0.0 else 2), delta_dot
+
+
+@jit
+def locate_root(fn, sign, p, ta, tb, y0, q, h, M, contacts, kin, work, tol):
+    """Illinois iteration on θ ∈ [ta, tb] with v(ta) ≤ 0 < v(tb); returns the right end."""
+    m = 2 * M.n_dof
+    dense_head(ta, y0, q, h, work, m)
+    va = value_at(fn, sign, p, work, M, contacts, kin)
+    dense_head(tb, y0, q, h, work, m)
+    vb = value_at(fn, sign, p, work, M, contacts, kin)
+    side = 0
+    for _ in range(200):
+        if (tb - ta) * h <= tol:
+            break
+        if va < vb and va <= 0.0 < vb:
+            tm = (ta * vb - tb * va) / (vb - va)
+        else:
+            tm = 0.5 * (ta + tb)
+        if not (ta < tm < tb):
+            tm = 0.5 * (ta + tb)
+        if (tb - ta) * h < 64 * tol:  # keep the bracket shrinking from both sides
+            tm = 0.5 * (ta + tb)
+        dense_head(tm, y0, q, h, work, m)
+        vm = value_at(fn, sign, p, work, M, contacts, kin)
+        if vm > 0.0:
+            tb, vb = tm, vm
+            if side == 1:
+                va *= 0.5
+            side = 1
+        else:
+            ta, va = tm, vm
+            if side == -1:
+                vb *= 0.5
+            side = -1
+    return tb
+
+
+@jit
+def largest_on(fn, sign, p, a, b, y0, q, h, M, contacts, kin, work):
+    """Golden-section search for the largest sign·fn on [a, b] (θ units); returns (θ, value)."""
+    m = 2 * M.n_dof
+    gr = 0.6180339887498949
+    c1 = b - gr * (b - a)
+    c2 = a + gr * (b - a)
+    dense_head(c1, y0, q, h, work, m)
+    f1 = value_at(fn, sign, p, work, M, contacts, kin)
+    dense_head(c2, y0, q, h, work, m)
+    f2 = value_at(fn, sign, p, work, M, contacts, kin)
+    for _ in range(60):
+        if f1 > 0.0 or f2 > 0.0 or (b - a) * h < ROOT_TOL:
+            break
+        if f1 > f2:
+            b, c2, f2 = c2, c1, f1
+            c1 = b - gr * (b - a)
+            dense_head(c1, y0, q, h, work, m)
+            f1 = value_at(fn, sign, p, work, M, contacts, kin)
+        else:
+            a, c1, f1 = c1, c2, f2
+            c2 = a + gr * (b - a)
+            dense_head(c2, y0, q, h, work, m)
+            f2 = value_at(fn, sign, p, work, M, contacts, kin)
+    return (c1, f1) if f1 > f2 else (c2, f2)
+
+
+@jit
+def find_event(y0, q, h, t0, M, contacts, near, n_near, kin, samples, values, work):
+    """Earliest θ in (0, 1] where a watched function of a near pair turns positive, or (1, False).
+
+    samples ((N_SAMPLES + 1, N) KINEMATICS) holds the berries at the step's sample points (the broad phase
+    computed them); a sign change between samples gives a bracket at once, a sampled local maximum that
+    is ≤ 0 but close to zero is refined by a golden-section search."""
+    tol = max(ROOT_TOL, 8 * 2.2e-16 * abs(t0))
+    for k in range(N_SAMPLES + 1):
+        at = samples[k]
+        for kk in range(n_near):
+            p = near[kk]
+            pr, c = M.pair[p], contacts[p]
+            delta, delta_dot, _, _, _ = pair_kinematics(M, pr, at)
+            na, f1, s1, f2, s2 = watched(c.mode, pr.law, pr.clamp)
+            values[k, 2 * kk] = event_value(f1, s1, pr, c, delta, delta_dot)
+            values[k, 2 * kk + 1] = event_value(f2, s2, pr, c, delta, delta_dot) if na == 2 else -1.0
+    best = 2.0
+    for kk in range(n_near):
+        p = near[kk]
+        pr, c = M.pair[p], contacts[p]
+        if c.smooth:
+            continue
+        na, f1, s1, f2, s2 = watched(c.mode, pr.law, pr.clamp)
+        for a in range(na):
+            fn = f1 if a == 0 else f2
+            sg = s1 if a == 0 else s2
+            col = 2 * kk + a
+            if values[0, col] > 0.0:
+                best = 0.0  # inconsistent start: switch at once, no advance
+                continue
+            for k in range(1, N_SAMPLES + 1):
+                th_a = (k - 1) / N_SAMPLES
+                if th_a >= best:
+                    break
+                if values[k, col] > 0.0:
+                    root = locate_root(fn, sg, p, th_a, k / N_SAMPLES, y0, q, h, M, contacts, kin, work, tol)
+                    best = min(best, root)
+                    break
+            for k in range(N_SAMPLES + 1):
+                lo = max(k - 1, 0)
+                hi = min(k + 1, N_SAMPLES)
+                if lo / N_SAMPLES >= best:
+                    break
+                v = values[k, col]
+                if v > 0.0 or v < values[lo, col] or v < values[hi, col]:
+                    continue
+                rise = (v - values[lo, col]) + (v - values[hi, col])
+                if v + 2.0 * rise <= 0.0:
+                    continue  # a local maximum far below zero: no graze here
+                th_m, vm = largest_on(fn, sg, p, lo / N_SAMPLES, hi / N_SAMPLES, y0, q, h, M, contacts, kin, work)
+                if vm > 0.0:
+                    root = locate_root(fn, sg, p, lo / N_SAMPLES, th_m, y0, q, h, M, contacts, kin, work, tol)
+                    best = min(best, root)
+    if best <= 1.0:
+        return best, True
+    return 1.0, False
+
+
+@jit
+def switch_pair(p, new_mode, t, delta_dot, contacts, Bk, cfg, impacts, cursor):
+    """Change a pair's mode: open or close its impact (a closed one goes to impacts at the recorder's
+    cursor) and keep the Zeno guard."""
+    c = contacts[p]
+    old = c.mode
+    if old == new_mode:
+        return
+    bp = Bk.pair[p]
+    tot = Bk.totals[0]
+    if old == 0:
+        c.v_onset = max(delta_dot, HC_MIN_APPROACH_SPEED)
+        bp.onset = t
+        bp.approach_speed = delta_dot
+        bp.impact_peak = 0.0
+        bp.impact_peak_time = t
+        bp.impulse_at_onset = bp.impulse
+        bp.dissipated_at_onset = bp.dissipated
+        bp.bruising = False
+        tot.collision_count += 1
+    elif new_mode == 0:
+        cur = cursor[0]
+        row = impacts[cur.n_impacts]
+        row.pair = p
+        row.onset = bp.onset
+        row.end = t
+        row.approach_speed = bp.approach_speed
+        row.peak_force = bp.impact_peak
+        row.peak_time = bp.impact_peak_time
+        row.impulse = bp.impulse - bp.impulse_at_onset
+        row.dissipated = bp.dissipated - bp.dissipated_at_onset
+        row.separation_speed = -delta_dot
+        check_bruising(bp, tot, cfg)
+        row.bruising = bp.bruising
+        cur.n_impacts += 1
+    c.mode = new_mode
+    Bk.counters[0].switches += 1
+    if bp.smooth_until == np.inf:
+        return  # a smooth law under step-size control: no events, so no Zeno guard either
+    ring = Bk.ring
+    kz = ring.shape[1]
+    pos = bp.ring_pos
+    ring[p, pos] = t
+    pos = (pos + 1) % kz
+    bp.ring_pos = pos
+    if t - ring[p, pos] < cfg.zeno_window:
+        c.smooth = True
+        bp.smooth_until = t + cfg.zeno_window
+        Bk.counters[0].zeno_activations += 1
+
+
+@inline
+def check_bruising(bp, tot, cfg):
+    """Count an open impact (bp, its BOOK_PAIR record) as bruising the first time it reaches a threshold."""
+    if not bp.bruising and bruising(bp.impact_peak, bp.dissipated - bp.dissipated_at_onset, cfg.bruise_force,
+                                    cfg.bruise_energy):
+        bp.bruising = True
+        tot.bruising_impacts += 1
+
+
+__all__ = ["EV_DELTA", "EV_PHI", "N_SAMPLES", "ROOT_TOL", "classify", "find_event", "switch_pair", "value_at",
+           "watched"]

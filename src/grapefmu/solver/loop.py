@@ -1,0 +1,200 @@
+"""The compiled event-driven integration loop (docs/solver.md): step, broad phase, events, recording,
+sampling and commit, in that order, one accepted step at a time.
+
+A step is truncated at the earliest contact switch (located to ~1e-13 s) and restarted just past the
+switching surface in the mode the state is now in; no step straddles an excitation breakpoint.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..physics.compiled import jit
+from ..physics.dynamics import rhs
+from ..physics.excitation import applied_accel
+from ..physics.kinematics import kinematics, workspace
+from .broadphase import keep_valid, rebuild, samples_for
+from .events import N_SAMPLES, classify, find_event, switch_pair
+from .sampling import sample_step
+from .step import dense, dense_coefficients, error_norm, initial_step, rk_step
+
+# statuses
+DONE, OUT_FULL, IMPACTS_FULL, MAX_STEPS, STEP_UNDERFLOW, NOT_FINITE = range(6)
+
+
+@jit
+def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
+    """Samples on the output grid in (t0, t_commit]. Returns False when the recorder is full."""
+    cur = R.cursor[0]
+    dt_out = cur.grid_dt
+    kg = cur.grid_k
+    last = int(math.floor((t_commit - cur.grid_t0) / dt_out + 1e-9))
+    if last - kg + 1 > R.t.shape[0] - cur.n_out:
+        return False
+    ts, ys, cs, accels, tots = R.t, R.y, R.contacts, R.accel, R.totals
+    o = cur.n_out
+    while kg <= last:
+        tg = min(cur.grid_t0 + kg * dt_out, t_commit)
+        dense((tg - t0) / h, y0, q, h, ys[o])
+        ts[o] = tg
+        accels[o, 0], accels[o, 1] = applied_accel(X, inp, tg, t0)
+        for p in range(contacts.shape[0]):
+            cs[o, p] = contacts[p]
+        tots[o] = totals[0]
+        o += 1
+        kg += 1
+    cur.n_out = o
+    cur.grid_k = kg
+    return True
+
+
+@jit
+def integrate(M, X, TB, S, config, R, t_target, max_steps):
+    """Advance S to t_target (or until the recorder fills or max_steps). Returns a status code."""
+    cfg = config[0]
+    P = S.physical
+    C = P.contacts
+    I = S.integrator
+    clk = I.clock[0]
+    Bk = S.book
+    cnt = Bk.counters[0]
+    B = S.broad_phase
+    inp = S.input
+    npair = C.shape[0]
+    ny = P.y.shape[0]
+    ns = TB.b.shape[0]
+    err_exp = -1.0 / (TB.error_order + 1.0)
+    fixed = cfg.fixed_step > 0.0
+    W = workspace(M)
+    samples = samples_for(M)
+    tmp, acc, ynew, err, scale, work = np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny)
+    fbuf = np.zeros((N_SAMPLES + 1, max(npair, 1)))
+    pwbuf = np.zeros((N_SAMPLES + 1, max(npair, 1)))
+    cls = np.zeros((N_SAMPLES + 1, max(npair, 1)), dtype=np.int64)
+    values = np.zeros((N_SAMPLES + 1, 2 * max(npair, 1)))
+    nbreak = 0 if inp[0].held else X.breaks.shape[0]  # a held input has no breakpoints
+    steps = 0
+    while P.t[0] < t_target:
+        if steps >= max_steps:
+            return MAX_STEPS
+        if R.cursor[0].n_impacts + npair > R.impacts.shape[0]:
+            return IMPACTS_FULL
+        t0 = P.t[0]
+        bi = clk.break_index
+        while bi < nbreak and X.breaks[bi] <= t0:
+            bi += 1
+        clk.break_index = bi
+        t_stop = t_target
+        if bi < nbreak and X.breaks[bi] < t_stop:
+            t_stop = X.breaks[bi]
+        args = (C, M, X, inp, W, B.near, B.count[0])
+        if fixed:
+            h_prop = cfg.fixed_step
+        else:
+            if clk.h <= 0.0:
+                clk.h = initial_step(t0, P.y, I.f, args, cfg, TB.order, t_stop)
+                cnt.rhs_evaluations += 1
+            h_prop = min(clk.h, cfg.h_max)
+        h = h_prop
+        clipped = False
+        if t0 + h >= t_stop or t_stop - (t0 + h) < 1e-9 * h:
+            h = t_stop - t0
+            clipped = True
+        t_new = t_stop if clipped else t0 + h
+        # --- one Runge–Kutta trial step
+        rk_step(t0, h, t_new, P.y, I.f, args, TB, I.stages, ynew, tmp, acc)
+        cnt.rhs_evaluations += ns
+        if fixed:
+            en = 0.0
+            for r in range(ny):
+                if not math.isfinite(ynew[r]):
+                    return NOT_FINITE
+        else:
+            en = error_norm(h, P.y, ynew, TB, I.stages, cfg, err, scale, acc)
+            if not (en <= 1.0):
+                fac = 0.2 if not math.isfinite(en) else max(0.2, 0.9 * en ** err_exp)
+                clk.h = h * fac
+                cnt.rejected += 1
+                if clk.h < 1e-15 * max(1.0, abs(t0)) * 16:
+                    return STEP_UNDERFLOW if math.isfinite(en) else NOT_FINITE
+                continue
+        dense_coefficients(TB, I.stages, I.dense, acc)
+        q = I.dense
+        # --- broad phase, then the earliest contact switch inside the step
+        far = keep_valid(P.y, q, h, M, C, Bk, B, cfg, work, samples) if npair > 0 else 0.0
+        if far < 0.0:
+            clk.h = 0.5 * h
+            cnt.rejected += 1
+            continue
+        cnt.near_pairs_sum += B.count[0]
+        theta_e = 1.0
+        event = False
+        if cfg.locate and B.count[0] > 0:
+            theta_e, event = find_event(P.y, q, h, t0, M, C, B.near, B.count[0], W.berry, samples, values, work)
+        t_commit = t_new if not event or theta_e >= 1.0 else t0 + theta_e * h
+        if R.cursor[0].grid_dt > 0.0 and not record_grid(t0, t_commit, h, P.y, q, X, inp, C, Bk.totals, R):
+            return OUT_FULL
+        sample_step(t0, h, theta_e, P.y, q, M, X, inp, C, B.near, B.count[0], Bk.totals, Bk.pair, Bk.peak_tension, cfg,
+                    W, work, fbuf, pwbuf, cls)
+        # --- commit
+        I.y_prev[:] = P.y
+        if event:
+            dense(theta_e, I.y_prev, q, h, P.y)
+        else:
+            P.y[:] = ynew
+        clk.t_prev = t0
+        clk.h_last = h
+        P.t[0] = t_commit
+        cnt.steps += 1
+        steps += 1
+        changed = B.count[0] > 0 and switch_modes(t_commit, event, P.y, M, C, Bk, B, cfg, R.impacts, R.cursor,
+                                                  W.berry, cls)
+        if far > 0.25 * cfg.skin:
+            # rebuild early, from where the step ended, so the list stays valid for the next steps
+            kinematics(P.y, M, W.berry)
+            rebuild(M, C, Bk, B, W.berry, cfg.skin)
+            changed = changed or cfg.step_control  # only step control ties smooth flags to the list
+        if changed or event or (bi < nbreak and t_commit >= X.breaks[bi]):
+            rhs(t_commit, t_commit, P.y, I.f, C, M, X, inp, W, B.near, B.count[0])
+            cnt.rhs_evaluations += 1
+        else:
+            I.f[:] = I.stages[ns]
+        if not fixed:
+            fac = 10.0 if en == 0.0 else min(10.0, max(0.2, 0.9 * en ** err_exp))
+            clk.h = h_prop if (clipped or event) and fac * h < h_prop else h * fac
+    return DONE
+
+
+@jit
+def switch_modes(t_commit, event, y, M, contacts, Bk, B, cfg, impacts, cursor, kin, cls):
+    """After a commit: each near pair takes the mode its state is in (at a located event, for every
+    pair without location, at the end of a Zeno window, or at every step for a smooth law under step
+    control). Returns whether any mode changed."""
+    changed = False
+    for kk in range(B.count[0]):
+        p = B.near[kk]
+        c = contacts[p]
+        until = Bk.pair[p].smooth_until
+        if c.smooth and until == np.inf:
+            new, dd = classify(p, y, M, contacts, kin, c.mode)  # impacts booked at step ends
+            switch_pair(p, new, t_commit, dd, contacts, Bk, cfg, impacts, cursor)
+            continue
+        if c.smooth:
+            if t_commit >= until:
+                same = True
+                for k in range(1, N_SAMPLES + 1):
+                    if cls[k, kk] != cls[0, kk]:
+                        same = False
+                if same:
+                    c.smooth = False
+                    new, dd = classify(p, y, M, contacts, kin, c.mode)
+                    switch_pair(p, new, t_commit, dd, contacts, Bk, cfg, impacts, cursor)
+                    changed = True
+            continue
+        if event or not cfg.locate:
+            new, dd = classify(p, y, M, contacts, kin, c.mode)
+            if new != c.mode:
+                switch_pair(p, new, t_commit, dd, contacts, Bk, cfg, impacts, cursor)
+                changed = True
+    return changed

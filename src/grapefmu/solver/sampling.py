@@ -1,0 +1,108 @@
+"""The committed part of each step, sampled: peaks of contact force and pedicel tension (the force
+refined around an interior maximum), each near pair's mode class at every sample (for the Zeno
+guard), and the per-pair impulse and dissipation integrals (Boole's rule, docs/model.md §6)."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..physics.compiled import jit
+from ..physics.damage import detaching
+from ..physics.excitation import applied_accel
+from ..physics.forces import active, forces, pair_force, pedicel_tension
+from ..physics.kinematics import kinematics, pair_state
+from .events import N_SAMPLES, check_bruising, classify
+from .step import dense_head
+
+#: Boole's rule on the N_SAMPLES + 1 equally spaced samples: exact for quintics like the step's dense output
+BOOLE = np.array([7.0, 32.0, 12.0, 32.0, 7.0]) / 90.0
+GOLDEN = 0.6180339887498949
+
+
+@jit
+def force_at(theta, p, y0, q, h, M, contacts, kin, work):
+    """Pair p's force at θ on the step's dense output."""
+    dense_head(theta, y0, q, h, work, 2 * M.n_dof)
+    pr = M.pair[p]
+    delta, delta_dot, _, _, _ = pair_state(work, M, pr, kin)
+    return pair_force(pr, contacts[p], delta, delta_dot)[0]
+
+
+@jit
+def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, totals, book_pair, peak_tension, cfg, W,
+                work, fbuf, pwbuf, cls):
+    tot = totals[0]
+    berry, kin = M.berry, W.berry
+    for k in range(N_SAMPLES + 1):
+        th = theta_end * k / N_SAMPLES
+        dense_head(th, y0, q, h, work, 2 * M.n_dof)
+        ax, az = applied_accel(X, inp, t0 + th * h, t0)
+        kinematics(work, M, kin)
+        forces(ax, az, contacts, M, W, near, nnear)
+        for kk in range(nnear):
+            p = near[kk]
+            fbuf[k, kk] = W.pair[kk].force
+            pwbuf[k, kk] = W.pair[kk].power
+            if contacts[p].smooth:
+                cls[k, kk] = classify(p, work, M, contacts, kin, contacts[p].mode)[0]
+        for i in range(berry.shape[0]):
+            tension = pedicel_tension(berry[i], kin[i])
+            if tension > peak_tension[i]:
+                if detaching(tension, cfg.detachment_force) and not detaching(peak_tension[i], cfg.detachment_force):
+                    tot.berries_over_detachment_force += 1
+                peak_tension[i] = tension
+                if tension > tot.peak_pedicel_tension:
+                    tot.peak_pedicel_tension = tension
+    span = theta_end * h
+    for kk in range(nnear):
+        p = near[kk]
+        c = contacts[p]
+        if not active(c):
+            continue
+        bp = book_pair[p]
+        fi = 0.0
+        pi = 0.0
+        for k in range(N_SAMPLES + 1):
+            fi += BOOLE[k] * fbuf[k, kk]
+            pi += BOOLE[k] * pwbuf[k, kk]
+        bp.impulse += span * fi
+        bp.dissipated += span * pi
+        kbest = 0
+        for k in range(1, N_SAMPLES + 1):
+            if fbuf[k, kk] > fbuf[kbest, kk]:
+                kbest = k
+        fbest = fbuf[kbest, kk]
+        tbest = theta_end * kbest / N_SAMPLES
+        turning = 0 < kbest < N_SAMPLES
+        if not turning and fbest > 0.0 and fbest >= bp.impact_peak:
+            # a maximum at a step end is a peak only if the force already falls there
+            eps = 1e-3 / N_SAMPLES
+            th_in = theta_end * (1.0 - eps) if kbest == N_SAMPLES else theta_end * eps
+            turning = force_at(th_in, p, y0, q, h, M, contacts, kin, work) > fbest
+        if turning and fbest > 0.0 and fbest >= bp.impact_peak:
+            # golden-section search between the neighbouring samples (one-sided at the step's ends,
+            # where the peak may sit just inside this step)
+            a = theta_end * max(kbest - 1, 0) / N_SAMPLES
+            b = theta_end * min(kbest + 1, N_SAMPLES) / N_SAMPLES
+            for _ in range(40):
+                c1 = b - GOLDEN * (b - a)
+                c2 = a + GOLDEN * (b - a)
+                if force_at(c1, p, y0, q, h, M, contacts, kin, work) > force_at(c2, p, y0, q, h, M, contacts, kin,
+                                                                                 work):
+                    b = c2
+                else:
+                    a = c1
+                if (b - a) * h < 1e-12:
+                    break
+            tm = 0.5 * (a + b)
+            fm = force_at(tm, p, y0, q, h, M, contacts, kin, work)
+            if fm > fbest:
+                fbest, tbest = fm, tm
+        if fbest > bp.peak_force:
+            bp.peak_force = fbest
+            if fbest > tot.peak_contact_force:
+                tot.peak_contact_force = fbest
+        if fbest > bp.impact_peak:
+            bp.impact_peak = fbest
+            bp.impact_peak_time = t0 + tbest * h
+        if c.mode != 0:
+            check_bruising(bp, tot, cfg)

@@ -1,0 +1,135 @@
+"""The solver's state grouped by concern (MuJoCo's mjData), and what one run records.
+
+Everything that changes while the solver steps lives here and nowhere else, so `get_state`/`set_state`
+restore a run exactly. Scalars sit in one-element structured arrays (named fields the compiled core can
+write in place); per-pair and per-berry quantities are named arrays.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..physics.excitation import INPUT
+from ..physics.forces import CONTACT
+from ..results.records import IMPACT, TOTALS
+
+__all__ = ["BOOK_COUNTERS", "BOOK_PAIR", "CONFIG", "CONTACT", "IMPACT", "INPUT", "TOTALS", "Book", "BroadPhase",
+           "Integrator", "Physical", "Recorder", "SolverState", "copy", "flatten", "recorder", "unflatten"]
+
+#: the solver's settings as the compiled core reads them
+CONFIG = np.dtype([("rtol", "f8"), ("atol", "f8"), ("fixed_step", "f8"), ("zeno_window", "f8"), ("locate", "?"),
+                   ("h_max", "f8"), ("skin", "f8"), ("step_control", "?"), ("bruise_force", "f8"),
+                   ("bruise_energy", "f8"), ("detachment_force", "f8")])
+#: integrator scalars
+CLOCK = np.dtype([("h", "f8"), ("t_prev", "f8"), ("h_last", "f8"), ("break_index", "i8")])
+#: how much work the solver did
+BOOK_COUNTERS = np.dtype([("steps", "i8"), ("rejected", "i8"), ("rhs_evaluations", "i8"), ("switches", "i8"),
+                          ("zeno_activations", "i8"), ("near_pairs_sum", "i8"), ("near_list_rebuilds", "i8")])
+#: per pair: the impact going on (valid while the pair is in contact), running totals, the Zeno guard
+BOOK_PAIR = np.dtype([("onset", "f8"), ("approach_speed", "f8"), ("impact_peak", "f8"), ("impact_peak_time", "f8"),
+                      ("impulse_at_onset", "f8"), ("dissipated_at_onset", "f8"), ("bruising", "?"),
+                      ("peak_force", "f8"),     # N, since the start, refined on the dense output
+                      ("impulse", "f8"),        # ∫F dt since the start, N·s
+                      ("dissipated", "f8"),     # ∫(F − F_el) δ̇ dt since the start, J
+                      ("smooth_until", "f8"),   # s; inf: smooth for good (a smooth law under step-size control)
+                      ("ring_pos", "i8")], align=True)
+#: the output grid's cursor
+CURSOR = np.dtype([("grid_t0", "f8"), ("grid_dt", "f8"), ("grid_k", "i8"), ("n_out", "i8"), ("n_impacts", "i8")])
+
+
+class Physical(NamedTuple):
+    """The state of the berries: time, y = [q | q̇ | energy integrals | base motion] and the contact modes."""
+
+    t: np.ndarray          # (1,) s
+    y: np.ndarray          # physics/layout.py
+    contacts: np.ndarray   # (P,) CONTACT
+
+
+class Integrator(NamedTuple):
+    """The Runge–Kutta method's memory: the derivative at y, the last step's stages and dense output."""
+
+    f: np.ndarray          # dy/dt at the current state
+    y_prev: np.ndarray     # the state at the last step's start
+    stages: np.ndarray     # (s + 1, ny)
+    dense: np.ndarray      # (ny, k): the last step's interpolant coefficients
+    clock: np.ndarray      # (1,) CLOCK
+
+
+class Book(NamedTuple):
+    """Impacts, peaks, per-pair integrals and the Zeno guard, kept while stepping so nothing is recomputed."""
+
+    counters: np.ndarray       # (1,) BOOK_COUNTERS
+    totals: np.ndarray         # (1,) TOTALS
+    pair: np.ndarray           # (P,) BOOK_PAIR
+    peak_tension: np.ndarray   # (N,) N
+    ring: np.ndarray           # (P, zeno_max_events) s: each pair's recent switch times (the Zeno guard)
+
+
+class BroadPhase(NamedTuple):
+    """A Verlet list: the pairs closer than the skin when it was built, and every pair in contact."""
+
+    near: np.ndarray       # (P,) pair indices, the first `count` valid, ascending
+    count: np.ndarray      # (1,) int
+    reference: np.ndarray  # (N, 3) berry centres when the list was built
+
+
+class SolverState(NamedTuple):
+    physical: Physical
+    input: np.ndarray      # (1,) INPUT: the held base acceleration, apart from the scene's excitation
+    integrator: Integrator
+    book: Book
+    broad_phase: BroadPhase
+
+
+class Recorder(NamedTuple):
+    """Where a run's samples and finished impacts go (not part of the state)."""
+
+    t: np.ndarray          # (cap,)
+    y: np.ndarray          # (cap, ny)
+    contacts: np.ndarray   # (cap, P) CONTACT
+    accel: np.ndarray      # (cap, 2)
+    totals: np.ndarray     # (cap,) TOTALS
+    impacts: np.ndarray    # (cap_impacts,) IMPACT
+    cursor: np.ndarray     # (1,) CURSOR
+
+
+def recorder(cap: int, ny: int, npair: int, cap_impacts: int) -> Recorder:
+    return Recorder(np.zeros(cap), np.zeros((cap, ny)), np.zeros((cap, npair), dtype=CONTACT), np.zeros((cap, 2)),
+                    np.zeros(cap, dtype=TOTALS), np.zeros(cap_impacts, dtype=IMPACT), np.zeros(1, dtype=CURSOR))
+
+
+def _walk(tree, prefix=""):
+    for name in tree._fields:
+        v = getattr(tree, name)
+        if isinstance(v, tuple):
+            yield from _walk(v, f"{prefix}{name}.")
+        else:
+            yield f"{prefix}{name}", v
+
+
+def flatten(state: SolverState) -> dict[str, np.ndarray]:
+    """Every array of the state by its dotted name ("physical.y", "book.zeno.ring", ...)."""
+    return dict(_walk(state))
+
+
+def unflatten(arrays: dict[str, np.ndarray], cls=SolverState, prefix: str = ""):
+    """The inverse of flatten (arrays are taken as they are: copy first if they are shared)."""
+    hints = {"physical": Physical, "integrator": Integrator, "book": Book, "broad_phase": BroadPhase}
+    return cls(*(unflatten(arrays, hints[f], f"{prefix}{f}.") if f in hints else arrays[f"{prefix}{f}"]
+                 for f in cls._fields))
+
+
+def _dup(a: np.ndarray) -> np.ndarray:
+    """a.copy(), through bytes for a record array (numpy copies those field by field, ten times slower)."""
+    return np.frombuffer(bytearray(a.tobytes()), a.dtype).reshape(a.shape) if a.dtype.names else a.copy()
+
+
+def copy(state: SolverState) -> SolverState:
+    """A deep copy (spelled out: it runs before every step a face takes, so it must be cheap)."""
+    P, I, Bk, B = state.physical, state.integrator, state.book, state.broad_phase
+    return SolverState(
+        Physical(P.t.copy(), P.y.copy(), _dup(P.contacts)), _dup(state.input),
+        Integrator(I.f.copy(), I.y_prev.copy(), I.stages.copy(), I.dense.copy(), _dup(I.clock)),
+        Book(_dup(Bk.counters), _dup(Bk.totals), _dup(Bk.pair), Bk.peak_tension.copy(), Bk.ring.copy()),
+        BroadPhase(B.near.copy(), B.count.copy(), B.reference.copy()))

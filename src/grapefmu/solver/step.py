@@ -1,0 +1,104 @@
+"""One Runge–Kutta step with its embedded error estimate and dense output (scipy's `_step_impl`)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..physics.dynamics import rhs, rhs_inline
+from ..physics.compiled import inline, jit
+
+
+@inline
+def dense(theta, y0, q, h, out):
+    """y(t0 + θh) = y0 + h Σ_j Q[:, j] θ^(j+1)."""
+    dense_head(theta, y0, q, h, out, y0.shape[0])
+
+
+@jit
+def dense_head(theta, y0, q, h, out, m):
+    """dense() for the first m components only (the angles and rates that events and forces need)."""
+    for r in range(m):
+        acc = 0.0
+        for j in range(q.shape[1] - 1, -1, -1):
+            acc = (acc + q[r, j]) * theta
+        out[r] = y0[r] + h * acc
+
+
+@jit
+def combine(coef, stages, count, out):
+    """out = Σ_{m < count} coef[m] · stages[m], summed in m order for every element (so it vectorises)."""
+    out[:] = 0.0
+    for m in range(count):
+        c = coef[m]
+        row = stages[m]
+        for r in range(out.shape[0]):
+            out[r] += c * row[r]
+
+
+@jit
+def rms_norm(x, scale):
+    s = 0.0
+    for i in range(x.shape[0]):
+        s += (x[i] / scale[i]) ** 2
+    return math.sqrt(s / x.shape[0])
+
+
+@jit
+def initial_step(t0, y0, f0, args, cfg, order, t_stop):
+    """Hairer's starting step size (scipy's select_initial_step)."""
+    C, M, X, inp, W, pairs, n_pairs = args
+    scale = cfg.atol + cfg.rtol * np.abs(y0)
+    d0 = rms_norm(y0, scale)
+    d1 = rms_norm(f0, scale)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, t_stop - t0)
+    y1 = y0 + h0 * f0
+    f1 = np.empty(y0.shape[0])
+    rhs(t0 + h0, t0, y1, f1, C, M, X, inp, W, pairs, n_pairs)
+    d2 = rms_norm(f1 - f0, scale) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / (order + 1))
+    return min(100 * h0, h1, cfg.h_max)
+
+
+@inline
+def rk_step(t0, h, t_new, y, f, args, TB, stages, ynew, tmp, acc):
+    """A trial step from (t0, y) with f = dy/dt there: ynew, and stages[s] = dy/dt at ynew (FSAL).
+    The combinations run stage by stage over the whole vector; each element sums in the same order."""
+    C, M, X, inp, W, pairs, n_pairs = args
+    ns = TB.b.shape[0]
+    ny = y.shape[0]
+    stages[0, :] = f
+    for st in range(1, ns):
+        combine(TB.a[st], stages, st, acc)
+        for r in range(ny):
+            tmp[r] = y[r] + h * acc[r]
+        rhs_inline(t0 + TB.c[st] * h, t0, tmp, stages[st], C, M, X, inp, W, pairs, n_pairs)
+    combine(TB.b, stages, ns, acc)
+    for r in range(ny):
+        ynew[r] = y[r] + h * acc[r]
+    rhs_inline(t_new, t0, ynew, stages[ns], C, M, X, inp, W, pairs, n_pairs)
+
+
+@inline
+def error_norm(h, y, ynew, TB, stages, cfg, err, scale, acc):
+    """The embedded estimate's RMS norm against atol + rtol·max(|y|, |y_new|) (inf if y_new is not finite)."""
+    for r in range(ynew.shape[0]):
+        if not math.isfinite(ynew[r]):
+            return np.inf
+    combine(TB.e, stages, TB.b.shape[0] + 1, acc)
+    for r in range(y.shape[0]):
+        err[r] = h * acc[r]
+        scale[r] = cfg.atol + cfg.rtol * max(abs(y[r]), abs(ynew[r]))
+    return rms_norm(err, scale)
+
+
+@inline
+def dense_coefficients(TB, stages, q, acc):
+    for j in range(TB.p.shape[1]):
+        combine(TB.p[:, j], stages, TB.b.shape[0] + 1, acc)
+        for r in range(acc.shape[0]):
+            q[r, j] = acc[r]
