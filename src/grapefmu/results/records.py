@@ -2,6 +2,8 @@
 what the run has done to the berries so far (every face reports the same totals)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 #: a finished impact, from the pair's first touch (δ = 0, closing) to its separation
@@ -17,11 +19,13 @@ TOTALS = np.dtype([("collision_count", "i8"), ("bruising_impacts", "i8"), ("berr
 def concat(arrays) -> np.ndarray:
     """np.concatenate along the first axis for record arrays of one dtype, through bytes: numpy promotes
     record dtypes field by field on every call, which costs more than a short run's whole integration."""
+    if len(arrays) == 1:
+        return arrays[0]
     arrays = [np.ascontiguousarray(a) for a in arrays]
     dtype, tail = arrays[0].dtype, arrays[0].shape[1:]
     if not dtype.names:
         return np.concatenate(arrays)
-    row = dtype.itemsize * int(np.prod(tail))
+    row = dtype.itemsize * math.prod(tail)
     raw = np.concatenate([a.view(np.uint8).reshape(len(a), row) for a in arrays])
     if row == 0:
         return np.zeros((len(raw), *tail), dtype)

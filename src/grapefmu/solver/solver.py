@@ -293,44 +293,43 @@ class Solver:
         n_expected = int(math.floor((t_end - self.t) / dt_out + 1e-9)) + 1
         rec = st.recorder(n_expected + 1, self.layout.size, npair, max(npair, 1) * 256)
         cur = rec.cursor
-        cur["grid_t0"], cur["grid_dt"], cur["grid_k"] = self.t, dt_out, 1
+        cur["grid_t0"], cur["grid_dt"], cur["grid_k"], cur["n_out"] = self.t, dt_out, 1, 1
+        rec.t[0], rec.y[0], rec.contacts[0] = self.t, self.state.physical.y, self.state.physical.contacts
+        rec.accel[0], rec.totals[0] = self.base_accel, self.state.book.totals[0]
         t_start = self.t
-        chunks = [self._sample_now()]
-        impacts = []
+        chunks, impacts = [], []  # what a full recorder handed over (rare: it is sized for the whole run)
         wall = time.perf_counter()
         chunk, steps = 5000, 0
         while True:
             status = self._integrate(t_end, rec, chunk)
-            if status in (IMPACTS_FULL, OUT_FULL, MAX_STEPS, DONE):
-                n_imp, n_out = int(cur["n_impacts"][0]), int(cur["n_out"][0])
-                impacts.append(rec.impacts[:n_imp].copy())
-                chunks.append(tuple(a[:n_out].copy() for a in rec[:5]))
+            if status == IMPACTS_FULL:
+                impacts.append(rec.impacts[: int(cur["n_impacts"][0])].copy())
                 cur["n_impacts"] = 0
+                continue
+            if status == OUT_FULL:
+                chunks.append(tuple(a[: int(cur["n_out"][0])].copy() for a in rec[:5]))
                 cur["n_out"] = 0
+                continue
             if status == MAX_STEPS:
                 steps += chunk
                 if progress:
                     progress(self.t, t_end)
                 if steps < self.max_steps:
                     continue
-            if status in (IMPACTS_FULL, OUT_FULL):
-                continue
             break
         if status != DONE:
             self._fail(status, before)
         wall = time.perf_counter() - wall
         if progress:
             progress(self.t, t_end)
+        chunks.append(tuple(a[: int(cur["n_out"][0])] for a in rec[:5]))
+        impacts.append(rec.impacts[: int(cur["n_impacts"][0])])
         t, y, contacts, accel, totals = (concat([c[i] for c in chunks]) for i in range(5))
         stats = self.stats | {"wall_time": wall, "method": self.method, "t_start": t_start, "rtol": self.rtol,
                               "atol": self.atol}
         return Run(self.scene, t, y, contacts, accel, totals,
                    Impacts.from_records(concat(impacts), self._open_impacts()),
                    self.state.book.pair["peak_force"].copy(), self.state.book.peak_tension.copy(), stats)
-
-    def _sample_now(self) -> tuple[np.ndarray, ...]:
-        return (np.array([self.t]), self.state.physical.y[None, :].copy(), self.state.physical.contacts[None, :].copy(),
-                np.array([self.base_accel]), self.totals())
 
     def _open_impacts(self) -> np.ndarray:
         """The impacts still going on, as rows that end now (separation speed NaN)."""

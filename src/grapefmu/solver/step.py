@@ -15,7 +15,7 @@ def dense(theta, y0, q, h, out):
     dense_head(theta, y0, q, h, out, y0.shape[0])
 
 
-@jit
+@inline
 def dense_head(theta, y0, q, h, out, m):
     """dense() for the first m components only (the angles and rates that events and forces need)."""
     for r in range(m):
