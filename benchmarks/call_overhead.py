@@ -7,7 +7,7 @@ import time
 
 import grapefmu
 from grapefmu import Solver
-from grapefmu.cli import default_scene_path
+from grapefmu.scenefile import default_scene_path
 
 
 def best(fn, n=2000, reps=5):

@@ -21,7 +21,7 @@ NULL_SLAVE = textwrap.dedent('''
     from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real
     from grapefmu_fmu.variables import variables
     from grapefmu import load_scene
-    from grapefmu.cli import default_scene_path
+    from grapefmu.scenefile import default_scene_path
 
     class NullFmu(Fmi2Slave):
         """The same variables as the grapefmu FMU, and a do_step that does nothing."""
@@ -91,7 +91,7 @@ WORKER = textwrap.dedent('''
 
 def core_cost() -> float:
     from grapefmu import Solver, load_scene
-    from grapefmu.cli import default_scene_path
+    from grapefmu.scenefile import default_scene_path
     acc = np.sin(np.arange(N_STEPS) * 0.01) * 3.0
     best = 1e9
     for _ in range(3):

@@ -14,7 +14,7 @@ import pytest
 
 from grapefmu import simulate
 from grapefmu.physics.excitation import accel
-from grapefmu.cli import default_scene_path
+from grapefmu.scenefile import default_scene_path
 from grapefmu.model.excitation import pick_and_place
 from grapefmu.scenefile import scene_from_dict
 

@@ -24,7 +24,7 @@ from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 
 from grapefmu import Solver, load_scene  # noqa: E402
-from grapefmu.cli import default_scene_path  # noqa: E402
+from grapefmu.scenefile import default_scene_path  # noqa: E402
 from grapefmu.recording.replay import check, read_recording  # noqa: E402
 from grapefmu.recording.stamps import stamp_seconds  # noqa: E402
 

@@ -8,7 +8,6 @@ Either way every interval integrated is recorded as `rachis/accel_applied` (stam
 is what `grapefmu replay --check` needs to reproduce the run exactly."""
 from __future__ import annotations
 
-import importlib
 import math
 import time
 
@@ -21,11 +20,12 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_srvs.srv import SetBool, Trigger
 
 from grapefmu import GrapefmuError, Solver, load_scene
-from grapefmu.cli import default_scene_path
+from grapefmu.scenefile import default_scene_path
 from grapefmu.recording import messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
 
+from .interfaces import message_class
 from .recorder import McapRecorder, metadata
 
 EVENTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
@@ -33,12 +33,6 @@ EVENTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability
 STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
 #: QoS per topic (default STATE_QOS)
 TOPIC_QOS = {"collision_events": EVENTS_QOS, "markers": 10, "/diagnostics": 10, "/clock": 10}
-
-
-def message_class(typename: str):
-    """The rclpy class of a ROS type name (it carries the type support; the bytes come from the typestore)."""
-    pkg, _, name = typename.partition("/msg/")
-    return getattr(importlib.import_module(f"{pkg}.msg"), name)
 
 
 def _range(lo, hi):

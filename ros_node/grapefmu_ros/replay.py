@@ -15,7 +15,7 @@ from grapefmu.recording import messages as msgs
 from grapefmu.recording.replay import iter_messages
 from grapefmu.recording.typestore import serialize
 
-from .node import message_class
+from .interfaces import message_class
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 

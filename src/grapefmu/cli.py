@@ -4,15 +4,11 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from importlib import resources
 from pathlib import Path
 
 from . import __version__
 from .errors import GrapefmuError
-
-
-def default_scene_path() -> Path:
-    return Path(str(resources.files("grapefmu") / "scenes" / "default.toml"))
+from .scenefile import default_scene_path
 
 
 class Progress:

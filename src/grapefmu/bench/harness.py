@@ -92,7 +92,7 @@ def cost_at(rows: list[Row], target: float = 1e-6) -> float:
 
 def compile_seconds() -> tuple[float, float]:
     """First simulate() in a fresh process with an empty numba cache (compile) and with the warm cache."""
-    code = ("import time; t = time.perf_counter(); import grapefmu; from grapefmu.cli import default_scene_path; "
+    code = ("import time; t = time.perf_counter(); import grapefmu; from grapefmu.scenefile import default_scene_path; "
             "grapefmu.simulate(grapefmu.load_scene(default_scene_path()), 0.1); print(time.perf_counter() - t)")
     out = []
     with tempfile.TemporaryDirectory() as d:

@@ -39,12 +39,12 @@ def rhs(t, t_ref, y, dy, contacts, M, X, inp, W, pairs, n_pairs):
         b, k = berry[i], kin[i]
         o = b.dof
         rate2 = 0.0
+        q_s, q_t = generalized_forces(b, k)
         for a in range(b.n_angles):
             qd = y[nd + o + a]
             dy[o + a] = qd
-            torque[o + a] = hinge_torque(b, a, y[o + a], qd)
+            torque[o + a] = hinge_torque(b, a, y[o + a], qd) + (q_s if a == 0 else q_t)
             rate2 += qd * qd
-        generalized_forces(b, k, torque)
         dy[o_dh + i] = b.hinge_damping * rate2
         work -= b.mass * b.twig_length * (ax * k.dux + az * k.duz)  # the inertial field's power −m a·ṗ
     for i in range(n):  # accelerations: the diagonal mass matrix m l² (1, cos² s) and the velocity terms
@@ -91,6 +91,6 @@ def derivative(M, y, contacts, accel=(0.0, 0.0), t: float = 0.0):
     from .kinematics import workspace
 
     dy = np.zeros_like(y)
-    rhs(t, t, y, dy, contacts, M, constant().arrays, held(*accel), workspace(M), np.arange(M.pair.shape[0]),
+    rhs(t, t, y, dy, contacts, M, constant().arrays, held(*accel)[0], workspace(M), np.arange(M.pair.shape[0]),
         M.pair.shape[0])
     return dy

@@ -20,23 +20,35 @@ INPUT = np.dtype([("held", np.bool_), ("ax", np.float64), ("az", np.float64)])
 
 @inline
 def base_accel(X, t, t_ref):
-    """a(t) of the scene's excitation X (model.excitation.ExcitationArrays), m/s²."""
-    par = X.par
+    """a(t) of the scene's excitation X (model.excitation.ExcitationArrays), m/s². No array is bound on the
+    constant and chirp paths: an array bound inside an inlined function costs two reference counts."""
     if X.kind == CONSTANT:
-        return par[0], par[1]
+        return X.par[0], X.par[1]
     if X.kind == CHIRP:
-        start = par[4]
-        dur = par[5]
+        start = X.par[4]
+        dur = X.par[5]
         if t_ref < start or t_ref >= start + dur:
             return 0.0, 0.0
         tau = t - start
-        s = math.sin(2.0 * math.pi * (par[2] * tau + 0.5 * (par[3] - par[2]) * tau * tau / dur))
-        return par[0] * s, par[1] * s
-    tab = X.table
+        s = math.sin(2.0 * math.pi * (X.par[2] * tau + 0.5 * (X.par[3] - X.par[2]) * tau * tau / dur))
+        return X.par[0] * s, X.par[1] * s
+    return table_accel(X.table, t, t_ref)
+
+
+@jit
+def table_accel(tab, t, t_ref):
+    """Linear in the row that holds t_ref (the last row with time ≤ t_ref), zero outside the table."""
     n = tab.shape[0]
     if t_ref < tab[0, 0] or t_ref >= tab[n - 1, 0]:
         return 0.0, 0.0
-    k = np.searchsorted(tab[:, 0], t_ref, side="right") - 1
+    lo, hi = 0, n - 1  # tab[lo, 0] <= t_ref < tab[hi, 0]
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if tab[mid, 0] <= t_ref:
+            lo = mid
+        else:
+            hi = mid
+    k = lo
     span = tab[k + 1, 0] - tab[k, 0]
     u = (t - tab[k, 0]) / span if span > 0.0 else 0.0
     return tab[k, 1] + u * (tab[k + 1, 1] - tab[k, 1]), tab[k, 2] + u * (tab[k + 1, 2] - tab[k, 2])
@@ -44,9 +56,10 @@ def base_accel(X, t, t_ref):
 
 @inline
 def applied_accel(X, inp, t, t_ref):
-    """What the rachis does: the held input while there is one, else the scene's excitation."""
-    if inp[0].held:
-        return inp[0].ax, inp[0].az
+    """What the rachis does: the held input (inp, an INPUT record) while there is one, else the scene's
+    excitation. A record, not its array: an array handed to an inlined function costs reference counts."""
+    if inp.held:
+        return inp.ax, inp.az
     return base_accel(X, t, t_ref)
 
 

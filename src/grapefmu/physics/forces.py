@@ -14,7 +14,7 @@ import numpy as np
 
 from ..model.contact import Law
 from .compiled import inline
-from .kinematics import pair_kinematics
+from .kinematics import pair_gap
 
 #: the discrete contact state of a pair (part of the physical state)
 CONTACT = np.dtype([("mode", "i8"),      # 0 apart, 1 loaded, 2 overlapping but unloaded
@@ -88,12 +88,11 @@ def rest_angle(b, a):
 
 
 @inline
-def coupling(M, cp, kin):
-    """The k3/c3 spring–damper (cp, a COUPLING record) on the change of horizontal separation s (§2):
-    (force on i along x, s, ṡ)."""
-    li, lj = M.berry[cp.i].twig_length, M.berry[cp.j].twig_length
-    sep = lj * kin[cp.j].ux - li * kin[cp.i].ux
-    sep_dot = lj * kin[cp.j].dux - li * kin[cp.i].dux
+def coupling(cp, bi, bj, ki, kj):
+    """The k3/c3 spring–damper (cp, a COUPLING record) between berries bi, bj (stage 1 in ki, kj) on the
+    change of horizontal separation s (§2): (force on i along x, s, ṡ)."""
+    sep = bj.twig_length * kj.ux - bi.twig_length * ki.ux
+    sep_dot = bj.twig_length * kj.dux - bi.twig_length * ki.dux
     return cp.stiffness * sep + cp.damping * sep_dot, sep, sep_dot
 
 
@@ -113,7 +112,7 @@ def forces(ax, az, contacts, M, W, pairs, n_pairs):
         k.fz = -m * (g + az)
     for k in range(M.coupling.shape[0]):
         cp = M.coupling[k]
-        fc, _, sep_dot = coupling(M, cp, kin)
+        fc, _, sep_dot = coupling(cp, berry[cp.i], berry[cp.j], kin[cp.i], kin[cp.j])
         kin[cp.i].fx += fc
         kin[cp.j].fx -= fc
         W.coupling_power[k] = cp.damping * sep_dot * sep_dot
@@ -127,7 +126,7 @@ def forces(ax, az, contacts, M, W, pairs, n_pairs):
             out.power = 0.0
             continue
         pr = M.pair[p]
-        delta, delta_dot, nx, ny, nz = pair_kinematics(M, pr, kin)
+        delta, delta_dot, nx, ny, nz = pair_gap(berry[pr.i], berry[pr.j], kin[pr.i], kin[pr.j])
         f, power = pair_force(pr, c, delta, delta_dot)
         out.force = f
         out.power = power
@@ -144,20 +143,17 @@ def forces(ax, az, contacts, M, W, pairs, n_pairs):
 
 
 @inline
-def generalized_forces(b, k, torque):
-    """Q = l Jᵀ R_z(−ψ) F added to torque for berry b with stage 1–2 in k (§2: J_s, J_t;
-    J = (cos s, 0, sin s) planar)."""
-    o = b.dof
+def generalized_forces(b, k):
+    """(Q_s, Q_t) = l Jᵀ R_z(−ψ) F for berry b with stage 1–2 in k (§2: J_s, J_t; J = (cos s, 0, sin s)
+    planar, Q_t = 0)."""
     l = b.twig_length
     ss, cs, st, ct = k.sin_s, k.cos_s, k.sin_t, k.cos_t
     fx, fy, fz = k.fx, k.fy, k.fz
     if b.n_angles == 1:
-        torque[o] += l * (cs * fx + ss * fz)
-        return
+        return l * (cs * fx + ss * fz), 0.0
     ca, sa = b.azimuth_cos, b.azimuth_sin
     lx, ly = ca * fx + sa * fy, -sa * fx + ca * fy
-    torque[o] += l * (cs * lx + st * ss * ly + ct * ss * fz)
-    torque[o + 1] += l * cs * (-ct * ly + st * fz)
+    return l * (cs * lx + st * ss * ly + ct * ss * fz), l * cs * (-ct * ly + st * fz)
 
 
 @inline

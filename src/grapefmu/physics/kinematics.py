@@ -44,18 +44,16 @@ def workspace(M) -> Workspace:
 
 
 @inline
-def berry_kinematics(y, nd, b, k):
-    """§1 for berry b (a BERRY record): trig, u, u̇, p and ṗ into k (a KINEMATICS record) from its angles
-    and rates in y = [q (nd) | q̇ (nd) | ...]."""
-    o = b.dof
-    s, sd = y[o], y[nd + o]
+def berry_kinematics(b, k, s, sd, t, td):
+    """§1 for berry b (a BERRY record): trig, u, u̇, p and ṗ into k (a KINEMATICS record) from its swing s,
+    tilt t (ignored for a planar berry) and their rates. Records and numbers only: an array handed to an
+    inlined function costs two reference counts per call."""
     ss, cs = math.sin(s), math.cos(s)
     if b.n_angles == 1:
         st, ct = 0.0, 1.0
         ux, uy, uz = ss, 0.0, -cs
         vx, vy, vz = cs * sd, 0.0, ss * sd
     else:
-        t, td = y[o + 1], y[nd + o + 1]
         st, ct = math.sin(t), math.cos(t)
         lx, ly, uz = ss, -st * cs, -ct * cs
         wx, wy, vz = cs * sd, st * ss * sd - ct * cs * td, ct * ss * sd + st * cs * td
@@ -74,8 +72,14 @@ def berry_kinematics(y, nd, b, k):
 def kinematics(y, M, kin):
     """Stage 1 for every berry into kin ((N,) KINEMATICS)."""
     berry = M.berry
+    nd = M.n_dof
     for i in range(berry.shape[0]):
-        berry_kinematics(y, M.n_dof, berry[i], kin[i])
+        b = berry[i]
+        o = b.dof
+        if b.n_angles == 1:
+            berry_kinematics(b, kin[i], y[o], y[nd + o], 0.0, 0.0)
+        else:
+            berry_kinematics(b, kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1])
 
 
 @inline
@@ -98,18 +102,18 @@ def pair_gap(bi, bj, ki, kj):
     return delta, delta_dot, nx, ny, nz
 
 
-@inline
-def pair_kinematics(M, pr, kin):
-    """pair_gap of pair record pr with stage 1 in kin."""
-    return pair_gap(M.berry[pr.i], M.berry[pr.j], kin[pr.i], kin[pr.j])
-
-
-@inline
+@jit
 def pair_state(y, M, pr, kin):
     """Stage 1 for one pair alone (the event search's root finding needs no other berry), then its gap."""
     berry = M.berry
-    berry_kinematics(y, M.n_dof, berry[pr.i], kin[pr.i])
-    berry_kinematics(y, M.n_dof, berry[pr.j], kin[pr.j])
+    nd = M.n_dof
+    for i in (pr.i, pr.j):
+        b = berry[i]
+        o = b.dof
+        if b.n_angles == 1:
+            berry_kinematics(b, kin[i], y[o], y[nd + o], 0.0, 0.0)
+        else:
+            berry_kinematics(b, kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1])
     return pair_gap(berry[pr.i], berry[pr.j], kin[pr.i], kin[pr.j])
 
 
@@ -128,4 +132,5 @@ def penetrations(y, M, out):
     kin = np.zeros(M.berry.shape[0], dtype=KINEMATICS)
     kinematics(y, M, kin)
     for p in range(M.pair.shape[0]):
-        out[p] = pair_kinematics(M, M.pair[p], kin)[0]
+        pr = M.pair[p]
+        out[p] = pair_gap(M.berry[pr.i], M.berry[pr.j], kin[pr.i], kin[pr.j])[0]

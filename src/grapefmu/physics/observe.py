@@ -11,7 +11,7 @@ import numpy as np
 
 from .compiled import jit
 from .forces import active, coupling, elastic_energy, forces, hinge_torque, pedicel_tension, rest_angle
-from .kinematics import kinematics, pair_kinematics, workspace
+from .kinematics import kinematics, pair_gap, workspace
 
 ENERGY_TERMS = ("kinetic", "gravity", "hinge_elastic", "coupling_elastic", "contact_elastic")
 
@@ -50,7 +50,8 @@ def observe(ys, contacts, accels, M, out):
         forces(accels[s, 0], accels[s, 1], C, M, W, every, npair)
         ve = 0.0
         for p in range(npair):
-            delta, _, nx, ny, nz = pair_kinematics(M, pairs[p], kin)
+            pr = pairs[p]
+            delta, _, nx, ny, nz = pair_gap(berry[pr.i], berry[pr.j], kin[pr.i], kin[pr.j])
             ve += elastic_energy(pairs[p], delta)
             out.contact_force[s, p] = W.pair[p].force
             out.penetration[s, p] = max(delta, 0.0) if active(C[p]) else 0.0
@@ -72,8 +73,9 @@ def observe(ys, contacts, accels, M, out):
                 out.hinge_torque[s, q] = hinge_torque(b, a, y[q], y[nd + q])
         vc = 0.0
         for k in range(M.coupling.shape[0]):
-            _, sep, _ = coupling(M, M.coupling[k], kin)
-            vc += 0.5 * M.coupling[k].stiffness * sep * sep
+            cp = M.coupling[k]
+            _, sep, _ = coupling(cp, berry[cp.i], berry[cp.j], kin[cp.i], kin[cp.j])
+            vc += 0.5 * cp.stiffness * sep * sep
         out.energy[s, 0] = ke
         out.energy[s, 1] = vg
         out.energy[s, 2] = vh

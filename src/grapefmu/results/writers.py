@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import GrapefmuError
 from .run import Run
 
 CSV_CORE = ("time", "angle_", "angular_velocity_", "pedicel_tension_", "contact_force_", "penetration_")

@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 import re
 import tomllib
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +39,11 @@ EXCITATION_KEYS = {
 SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events",
                "contact_location"}
 THRESHOLD_KEYS = {"detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction"}
+
+
+def default_scene_path() -> Path:
+    """The packaged default scene: the paper's dual system with Kyoho-like berries (docs/parameters.md)."""
+    return Path(str(resources.files("grapefmu") / "scenes" / "default.toml"))
 
 
 def load_scene(path: str | Path) -> Scene:

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from ..physics.compiled import jit
-from ..physics.kinematics import KINEMATICS, kinematics, pair_kinematics
+from ..physics.kinematics import KINEMATICS, kinematics, pair_gap
 from .events import N_SAMPLES
 from .step import dense_head
 
@@ -29,7 +29,8 @@ def rebuild(M, contacts, Bk, B, kin, skin):
     nn = 0
     for p in range(contacts.shape[0]):
         c = contacts[p]
-        near = -pair_kinematics(M, M.pair[p], kin)[0] < skin or c.mode != 0
+        pr = M.pair[p]
+        near = -pair_gap(M.berry[pr.i], M.berry[pr.j], kin[pr.i], kin[pr.j])[0] < skin or c.mode != 0
         if Bk.pair[p].smooth_until == np.inf:
             c.smooth = near
         if near or c.smooth:

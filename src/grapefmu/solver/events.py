@@ -15,7 +15,7 @@ from ..model.contact import HC_MIN_APPROACH_SPEED, Law
 from ..physics.compiled import inline, jit
 from ..physics.damage import bruising
 from ..physics.forces import pair_law
-from ..physics.kinematics import pair_kinematics, pair_state
+from ..physics.kinematics import pair_gap, pair_state
 from .step import dense_head
 
 EV_DELTA, EV_PHI = 0, 1
@@ -137,7 +137,7 @@ def find_event(y0, q, h, t0, M, contacts, near, n_near, kin, samples, values, wo
         for kk in range(n_near):
             p = near[kk]
             pr, c = M.pair[p], contacts[p]
-            delta, delta_dot, _, _, _ = pair_kinematics(M, pr, at)
+            delta, delta_dot, _, _, _ = pair_gap(M.berry[pr.i], M.berry[pr.j], at[pr.i], at[pr.j])
             na, f1, s1, f2, s2 = watched(c.mode, pr.law, pr.clamp)
             values[k, 2 * kk] = event_value(f1, s1, pr, c, delta, delta_dot)
             values[k, 2 * kk + 1] = event_value(f2, s2, pr, c, delta, delta_dot) if na == 2 else -1.0

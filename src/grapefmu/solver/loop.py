@@ -60,7 +60,7 @@ def integrate(M, X, TB, S, config, R, t_target, max_steps):
     Bk = S.book
     cnt = Bk.counters[0]
     B = S.broad_phase
-    inp = S.input
+    inp = S.input[0]
     npair = C.shape[0]
     ny = P.y.shape[0]
     ns = TB.b.shape[0]
@@ -73,7 +73,7 @@ def integrate(M, X, TB, S, config, R, t_target, max_steps):
     pwbuf = np.zeros((N_SAMPLES + 1, max(npair, 1)))
     cls = np.zeros((N_SAMPLES + 1, max(npair, 1)), dtype=np.int64)
     values = np.zeros((N_SAMPLES + 1, 2 * max(npair, 1)))
-    nbreak = 0 if inp[0].held else X.breaks.shape[0]  # a held input has no breakpoints
+    nbreak = 0 if inp.held else X.breaks.shape[0]  # a held input has no breakpoints
     steps = 0
     while P.t[0] < t_target:
         if steps >= max_steps:

@@ -57,7 +57,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     W = workspace(M)
     kin = W.berry
     every = np.arange(npair)
-    scene_input = held(on=False)
+    scene_input = held(on=False)[0]
     rows, open_imp = [], {}
     # the reference integrates each pair's impulse and dissipation as extra ODE components, which
     # rhs fills when dy has room for them (the event solver uses quadrature), so the two check each other

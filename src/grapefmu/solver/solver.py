@@ -72,7 +72,7 @@ def _start(S, M, X, skin):
 @jit
 def _derivative(S, M, X):
     t = S.physical.t[0]
-    rhs(t, t, S.physical.y, S.integrator.f, S.physical.contacts, M, X, S.input, workspace(M), S.broad_phase.near,
+    rhs(t, t, S.physical.y, S.integrator.f, S.physical.contacts, M, X, S.input[0], workspace(M), S.broad_phase.near,
         S.broad_phase.count[0])
 
 
