@@ -129,11 +129,20 @@ def cmd_paper(a: argparse.Namespace) -> int:
     return reproduce(Path(a.out))
 
 
-def cmd_build_fmu(a: argparse.Namespace) -> int:
+def face(name: str, needs: str):
+    """A function that a face (the FMU builder, the ROS node) registers in the entry-point group
+    `grapefmu.faces`: the core names no face, and a missing one is one clear line."""
+    from importlib.metadata import entry_points
+
+    found = entry_points(group="grapefmu.faces", name=name)
     try:
-        from grapefmu_fmu.build import build_fmu
-    except ImportError as e:
-        raise GrapefmuError(f"build-fmu needs the FMU extra (pip install 'grapefmu[fmu]'): {e}") from None
+        return next(iter(found)).load()
+    except (StopIteration, ImportError) as e:
+        raise GrapefmuError(f"this command needs {needs}: {e or 'not installed'}") from None
+
+
+def cmd_build_fmu(a: argparse.Namespace) -> int:
+    build_fmu = face("build_fmu", "the FMU extra (pip install 'grapefmu[fmu]')")
     out = build_fmu(a.scene or default_scene_path(), a.output, a.fmi, a.outputs)
     print(f"wrote {out} (FMI {a.fmi}.0 co-simulation)")
     return 0
@@ -141,11 +150,7 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
 
 def cmd_replay(a: argparse.Namespace) -> int:
     if a.publish:
-        try:
-            from grapefmu_ros.replay import publish
-        except ImportError as e:
-            raise GrapefmuError(f"replay --publish needs ROS 2 (rclpy) installed: {e}") from None
-        return publish(a.recording, a.rate)
+        return face("publish", "ROS 2 (pip install 'grapefmu[ros]')")(a.recording, a.rate)
     from .recording.replay import check
     r = check(a.recording)
     if r.truncated:
