@@ -25,6 +25,10 @@ class SolverError(GrapefmuError, RuntimeError):
     """
 
 
+class StateError(GrapefmuError, ValueError):
+    """A solver state handed to set_state does not belong to this solver or is corrupt; the solver keeps its own."""
+
+
 class RecordingError(GrapefmuError):
     """A recording cannot be written or read as asked (an unknown message field, a topic of another type,
     a file that is not a grapefmu MCAP recording)."""

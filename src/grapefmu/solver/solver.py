@@ -7,13 +7,14 @@ whole state exactly, solver internals included. Every failure leaves the state a
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import SolverError
+from ..errors import SolverError, StateError
 from ..model.contact import HC_MIN_APPROACH_SPEED, Law
 from ..model.model import Scene
 from ..physics import observe as obs
@@ -126,17 +127,33 @@ class Solver:
                                      np.zeros((ny, self.tableau.p.shape[1])), np.zeros(1, dtype=st.CLOCK)),
             book=st.Book(np.zeros(1, dtype=st.BOOK_COUNTERS), totals, np.zeros(npair, dtype=st.BOOK_PAIR),
                          np.full(n, -np.inf), np.full((npair, zeno_max), -np.inf)),
-            broad_phase=st.BroadPhase(np.zeros(npair, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros((n, 3))))
+            broad_phase=st.BroadPhase(np.zeros(npair, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros((n, 3))),
+            fingerprint=np.array([self._fingerprint()], dtype=np.uint64))
         if self.config["step_control"][0]:
             S.book.pair["smooth_until"][self.M.pair["law"] != Law.KELVIN_VOIGT] = np.inf  # no force jump at onset
         _start(S, self.M, self.excitation, self.config["skin"][0])
         return S
+
+    def _fingerprint(self) -> int:
+        """The model, method and settings a state belongs to, as one number."""
+        M = self.M
+        h = hashlib.blake2b(digest_size=8)
+        for part in (M.berry, M.pair, M.coupling, np.array([M.gravity]), self.config, self.excitation.par,
+                     self.excitation.table, np.frombuffer(self.method.encode(), np.uint8)):
+            h.update(np.ascontiguousarray(part).tobytes())
+        return int.from_bytes(h.digest(), "little")
 
     def get_state(self) -> st.SolverState:
         """A deep copy: restoring it with set_state replays the same trajectory bit for bit."""
         return st.copy(self.state)
 
     def set_state(self, state: st.SolverState) -> None:
+        """Restore a state from get_state of a solver of the same scene and method; anything else, or a
+        corrupted state, is refused with a StateError naming the field, and the solver keeps its own."""
+        st.check(state, self.state)
+        n_break = self.excitation.breaks.shape[0]
+        if int(state.integrator.clock["break_index"][0]) > n_break:
+            raise StateError(f"state integrator.clock.break_index: beyond the excitation's {n_break} breakpoints")
         self.state = st.copy(state)
 
     @property
@@ -244,8 +261,13 @@ class Solver:
         """Integrate exactly dt seconds. With base_accel = (a_x, a_z) the rachis acceleration is held at
         that value over the interval (zero-order hold, as an FMU input or a ROS message gives it);
         without it the scene's excitation is used. On failure the state is left unchanged."""
-        if not (isinstance(dt, (int, float)) and not isinstance(dt, bool) and math.isfinite(dt) and dt > 0):
+        try:
+            ok = not isinstance(dt, bool) and isinstance(dt, (int, float)) and math.isfinite(float(dt)) and dt > 0
+        except OverflowError:
+            ok = False
+        if not ok:
             raise SolverError(f"dt: expected a finite step > 0 s, got {dt!r}")
+        dt = float(dt)
         held = None
         if base_accel is not None:
             try:

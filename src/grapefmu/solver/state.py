@@ -80,6 +80,7 @@ class SolverState(NamedTuple):
     integrator: Integrator
     book: Book
     broad_phase: BroadPhase
+    fingerprint: np.ndarray  # (1,) uint64: the model and method the state belongs to (set_state checks it)
 
 
 class Recorder(NamedTuple):
@@ -115,7 +116,12 @@ def flatten(state: SolverState) -> dict[str, np.ndarray]:
 
 def unflatten(arrays: dict[str, np.ndarray], cls=SolverState, prefix: str = ""):
     """The inverse of flatten (arrays are taken as they are: copy first if they are shared)."""
+    from ..errors import StateError
+
     hints = {"physical": Physical, "integrator": Integrator, "book": Book, "broad_phase": BroadPhase}
+    missing = [f"{prefix}{f}" for f in cls._fields if f not in hints and f"{prefix}{f}" not in arrays]
+    if missing:
+        raise StateError(f"state {missing[0]}: missing (not a solver state of this version)")
     return cls(*(unflatten(arrays, hints[f], f"{prefix}{f}.") if f in hints else arrays[f"{prefix}{f}"]
                  for f in cls._fields))
 
@@ -132,4 +138,71 @@ def copy(state: SolverState) -> SolverState:
         Physical(P.t.copy(), P.y.copy(), _dup(P.contacts)), _dup(state.input),
         Integrator(I.f.copy(), I.y_prev.copy(), I.stages.copy(), I.dense.copy(), _dup(I.clock)),
         Book(_dup(Bk.counters), _dup(Bk.totals), _dup(Bk.pair), Bk.peak_tension.copy(), Bk.ring.copy()),
-        BroadPhase(B.near.copy(), B.count.copy(), B.reference.copy()))
+        BroadPhase(B.near.copy(), B.count.copy(), B.reference.copy()), state.fingerprint.copy())
+
+
+def _fields(a: np.ndarray):
+    """(name, values) of an array, field by field for a record array."""
+    if a.dtype.names:
+        return [(f".{n}", a[n]) for n in a.dtype.names]
+    return [("", a)]
+
+
+#: fields whose floats may be infinite: never-switched ring slots and peaks not yet seen (−inf), a smooth law
+#: under step-size control (smooth_until = +inf)
+MAY_BE_INFINITE = {"book.ring", "book.peak_tension", "book.totals.peak_pedicel_tension", "book.pair.smooth_until"}
+
+
+def check(state, template: SolverState) -> None:
+    """Refuse, naming the field, a state that does not fit the solver whose fresh state is `template`
+    (another scene, another method, another layout) or holds values the compiled core cannot trust
+    (NaN, out-of-range indices and modes). Raises StateError; nothing is changed."""
+    from ..errors import StateError
+
+    if not isinstance(state, SolverState):
+        raise StateError(f"state: expected the SolverState that get_state returns, got {type(state).__name__}")
+    try:
+        got = flatten(state)
+    except AttributeError as e:
+        raise StateError(f"state: not a SolverState of this version ({e})") from None
+    want = flatten(template)
+    for name, ref in want.items():
+        a = got.get(name)
+        if not isinstance(a, np.ndarray):
+            raise StateError(f"state {name}: expected an array, got {type(a).__name__}")
+        if a.dtype != ref.dtype or a.shape != ref.shape:
+            raise StateError(f"state {name}: {a.dtype.str if not a.dtype.names else 'record'} {a.shape} does not "
+                             f"match this solver's {ref.shape} (a state from another scene or method?)")
+    if state.fingerprint[0] != template.fingerprint[0]:
+        raise StateError("state fingerprint: the state was made by another scene or method (same sizes, other "
+                         "parameters); the solver keeps its own")
+    for name, a in got.items():
+        for field, v in _fields(a):
+            if v.dtype.kind == "f":
+                bad = np.isnan(v) | (np.isinf(v) & (f"{name}{field}" not in MAY_BE_INFINITE))
+                if bad.any():
+                    raise StateError(f"state {name}{field}: {v[bad].flat[0]!r} is not a finite number")
+    npair = state.physical.contacts.shape[0]
+    mode = state.physical.contacts["mode"]
+    if ((mode < 0) | (mode > 2)).any():
+        raise StateError(f"state physical.contacts.mode: {int(mode[(mode < 0) | (mode > 2)][0])} is not 0, 1 or 2")
+    if (state.physical.contacts["v_onset"] <= 0).any():
+        raise StateError("state physical.contacts.v_onset: onset speeds must be > 0 m/s")
+    count = int(state.broad_phase.count[0])
+    if not 0 <= count <= npair:
+        raise StateError(f"state broad_phase.count: {count} is outside [0, {npair}]")
+    near = state.broad_phase.near[:count]
+    every = state.broad_phase.near
+    if ((every < 0) | (every >= max(npair, 1))).any() or (np.diff(near) <= 0).any():
+        raise StateError(f"state broad_phase.near: pair indices must rise strictly within [0, {npair})")
+    if not (mode[np.setdiff1d(np.arange(npair), near)] == 0).all():
+        raise StateError("state broad_phase.near: a pair in contact is missing from the near list")
+    ring_pos = state.book.pair["ring_pos"]
+    if ((ring_pos < 0) | (ring_pos >= state.book.ring.shape[1])).any():
+        raise StateError(f"state book.pair.ring_pos: outside [0, {state.book.ring.shape[1]})")
+    clock = state.integrator.clock[0]
+    if clock["h"] < 0 or clock["break_index"] < 0:
+        raise StateError("state integrator.clock: the step size and breakpoint index must be ≥ 0")
+    for f in state.book.counters.dtype.names:
+        if state.book.counters[f][0] < 0:
+            raise StateError(f"state book.counters.{f}: must be ≥ 0")
