@@ -228,8 +228,9 @@ class Solver:
     def _closed_into(self, rec: st.Recorder) -> None:
         """Move the impacts that ended out of the recorder."""
         n = int(rec.cursor["n_impacts"][0])
-        self._closed.append(rec.impacts[:n].copy())
-        rec.cursor["n_impacts"] = 0
+        if n:
+            self._closed.append(rec.impacts[:n].copy())
+            rec.cursor["n_impacts"] = 0
 
     def step(self) -> float:
         """Take one accepted step (it may end early at a contact switch or breakpoint); return the new time."""
