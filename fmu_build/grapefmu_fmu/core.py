@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from grapefmu import GrapefmuError, Solver
+from grapefmu.errors import StateError
 from grapefmu.model.contact import LAWS, Law
 from grapefmu.results.catalogue import table
 from grapefmu.scenefile import parse_scene, scene_from_dict
@@ -181,10 +182,18 @@ class FmuCore:
 
     @staticmethod
     def state_from_bytes(data: bytes) -> dict:
-        z = np.load(io.BytesIO(bytes(data)), allow_pickle=False)
-        cast = {"bool": bool, "int": int, "float": float}
-        values = {str(n): cast[str(k)](x) for n, x, k in zip(z["value_names"], z["value_data"], z["value_kind"])}
-        solver = None
-        if any(k.startswith("solver.") for k in z.files):
-            solver = solver_state.unflatten({k[len("solver."):]: z[k].copy() for k in z.files if k.startswith("solver.")})
-        return {"values": values, "solver": solver, "error": str(z["error"]) or None}
+        """The state state_to_bytes wrote; anything else is a StateError (set_state then checks the solver
+        part against the instance's own)."""
+        try:
+            z = np.load(io.BytesIO(bytes(data)), allow_pickle=False)
+            cast = {"bool": bool, "int": int, "float": float}
+            values = {str(n): cast[str(k)](x) for n, x, k in zip(z["value_names"], z["value_data"], z["value_kind"])}
+            solver = None
+            if any(k.startswith("solver.") for k in z.files):
+                solver = solver_state.unflatten({k[len("solver."):]: z[k].copy() for k in z.files
+                                                 if k.startswith("solver.")})
+            return {"values": values, "solver": solver, "error": str(z["error"]) or None}
+        except StateError:
+            raise
+        except Exception as e:  # noqa: BLE001 - a corrupted buffer fails in many ways inside numpy's reader
+            raise StateError(f"serialized FMU state: not one this FMU wrote ({type(e).__name__}: {e})") from None
