@@ -46,7 +46,7 @@ def workspace(M) -> Workspace:
 @inline
 def berry_kinematics(b, k, s, sd, t, td):
     """§1 for berry b (a BERRY record): trig, u, u̇, p and ṗ into k (a KINEMATICS record) from its swing s,
-    tilt t (ignored for a planar berry) and their rates. Records and numbers only: an array handed to an
+    tilt t (ignored for a planar berry: t and ṫ are then any numbers) and their rates. Records and numbers only: an array handed to an
     inlined function costs two reference counts per call."""
     ss, cs = math.sin(s), math.cos(s)
     if b.n_angles == 1:
@@ -74,12 +74,8 @@ def kinematics(y, M, kin):
     berry = M.berry
     nd = M.n_dof
     for i in range(berry.shape[0]):
-        b = berry[i]
-        o = b.dof
-        if b.n_angles == 1:
-            berry_kinematics(b, kin[i], y[o], y[nd + o], 0.0, 0.0)
-        else:
-            berry_kinematics(b, kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1])
+        o = berry[i].dof  # a planar berry ignores t: y[o + 1] is then the next angle (y runs on past q̇)
+        berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1])
 
 
 @inline
@@ -108,12 +104,8 @@ def pair_state(y, M, pr, kin):
     berry = M.berry
     nd = M.n_dof
     for i in (pr.i, pr.j):
-        b = berry[i]
-        o = b.dof
-        if b.n_angles == 1:
-            berry_kinematics(b, kin[i], y[o], y[nd + o], 0.0, 0.0)
-        else:
-            berry_kinematics(b, kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1])
+        o = berry[i].dof
+        berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1])
     return pair_gap(berry[pr.i], berry[pr.j], kin[pr.i], kin[pr.j])
 
 
