@@ -145,3 +145,11 @@ def test_newtons_cradle_conserves_momentum_and_energy_in_the_elastic_limit():
     assert px[k1] == pytest.approx(px[k0], rel=2e-3)
     # the last berry leaves with (nearly) all of it
     assert run.angular_velocities[k1, -1] > 0.9 * run.angular_velocities[k0, 0]
+
+
+def test_cluster_plot_is_drawn(tmp_path):
+    """More than LINES_LIMIT berries: the cluster figure (envelopes, 3-D snapshots)."""
+    from grapefmu.results.plot import plot_run
+    sc = scene_from_dict({**cluster_scene(ClusterSpec(berries=12, seed=4)), "solver": {"t_end": 0.05}}, Path.cwd())
+    plot_run(simulate(sc), tmp_path / "c.png")
+    assert (tmp_path / "c.png").stat().st_size > 20_000

@@ -120,33 +120,34 @@ def test_compiled_rhs_matches_lagrange_equations(law):
 
 
 def test_pedicel_tension_balances_radial_forces():
-    """T from its closed form against m p̈·e_r = −T + m(g⃗ − a)·e_r + F·e_r, with p̈ from the RHS."""
+    """T from the code against the berry's radial balance m p̈·e_r = −T + m(g⃗ − a)·e_r + F·e_r, with the
+    contact force (Kelvin–Voigt, loaded) and the coupling force computed here from the geometry."""
     berries = (Berry("left", 0.011, 0.0135, 0.03, -0.013, 1e-3, 2e-5), Berry("right", 0.012, 0.014, 0.035, 0.013, 1e-3, 2e-5))
-    sc = Scene(Model(berries, (ContactPair(0, 1, ContactLaw("kelvin-voigt", 2000.0, 1.4)),),
-                     (Coupling(0, 1, 2.0, 0.01),)), (0.12, -0.1), (0.0, 0.0))
-    sol = Solver(sc)
-    y = sol.y
+    k, c, k3, c3 = 2000.0, 1.4, 2.0, 0.01
+    sc = Scene(Model(berries, (ContactPair(0, 1, ContactLaw("kelvin-voigt", k, c)),), (Coupling(0, 1, k3, c3),)),
+               (0.12, -0.1), (0.0, 0.0))
+    y = Solver(sc).y
     y[2:4] = [1.2, -0.7]
     ax, ay = 1.5, -2.0
-    contacts = loaded(1, 0.1)
-    dyv = derivative(sc.model.arrays, y, contacts, (ax, ay))
-    out = observe_one(sc, y, contacts, (ax, ay))
-    # the forces the berries exert on each other, from the observation's contact force and normal and the
-    # coupling (k3, c3 on the change of horizontal separation s): +F n on the pair's second berry
-    fn = out.contact_force[0, 0] * out.contact_normal[0, 0]
-    sep = 0.035 * math.sin(y[1]) - 0.03 * math.sin(y[0])
-    sep_dot = 0.035 * math.cos(y[1]) * y[3] - 0.03 * math.cos(y[0]) * y[2]
-    fc = 2.0 * sep + 0.01 * sep_dot
-    fext = np.array([-fn + [fc, 0, 0], fn - [fc, 0, 0]])
-    assert np.abs(fext).max() > 0.01  # the berries really push on each other here
-    tens = out.pedicel_tension[0]
+    out = observe_one(sc, y, loaded(1, 0.1), (ax, ay))
+    q, w = y[0:2], y[2:4]
+    h = np.array([[b.hinge_x, 0.0] for b in berries])
+    length = np.array([b.twig_length for b in berries])
+    p = h + length[:, None] * np.column_stack([np.sin(q), -np.cos(q)])
+    v = (length * w)[:, None] * np.column_stack([np.cos(q), np.sin(q)])
+    d = p[1] - p[0]
+    n = d / np.linalg.norm(d)
+    delta = berries[0].radius + berries[1].radius - np.linalg.norm(d)
+    f = k * delta + c * -(n @ (v[1] - v[0]))
+    sep, sep_dot = d[0] - (h[1, 0] - h[0, 0]), v[1, 0] - v[0, 0]
+    fc = k3 * sep + c3 * sep_dot
+    fext = np.array([-f * n + [fc, 0.0], f * n - [fc, 0.0]])  # +F n on the pair's second berry
+    assert delta > 0 and f > 0.01  # the berries really push on each other here
     for i, b in enumerate(berries):
-        m, length = b.mass, b.twig_length
-        q, w, a = y[i], y[2 + i], dyv[2 + i]
-        acc = length * np.array([a * math.cos(q) - w * w * math.sin(q), a * math.sin(q) + w * w * math.cos(q)])
-        er = np.array([math.sin(q), -math.cos(q)])
-        expected = -m * acc @ er + m * (np.array([-ax, -9.81 - ay]) @ er) + fext[i, [0, 2]] @ er
-        assert tens[i] == pytest.approx(expected, rel=1e-12)
+        er = np.array([math.sin(q[i]), -math.cos(q[i])])
+        radial = -b.twig_length * w[i] ** 2  # p̈·e_r of a point on a circle
+        expected = -b.mass * radial + b.mass * (np.array([-ax, -9.81 - ay]) @ er) + fext[i] @ er
+        assert out.pedicel_tension[0, i] == pytest.approx(expected, rel=1e-12)
 
 
 def observe_one(sc, y, contacts, accel):

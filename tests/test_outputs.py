@@ -88,3 +88,12 @@ def test_example_recordings_read_back_and_replay_exactly(name):
     assert topics["joint_states"] > 2000 and "collision_events" in topics and "rachis/accel_applied" in topics
     res = check(path)
     assert res.truncated is None and res.compared >= 2000 and res.max_deviation == 0.0
+
+
+def test_summary_counts_to_the_end_of_the_run_not_its_last_sample():
+    """t_end off the output grid, an impact after the last sample: the summary still counts it."""
+    r = simulate(scene(dual(solver={"t_end": 0.0895, "output_interval": 0.01})))
+    assert r.t[-1] < 0.0895 and len(r.impacts) == 1 and r.impacts.onset[0] > r.t[-1]
+    s = r.summary()
+    assert s["collision_count"] == 1 and s["bruising_impacts"] == int(r.impacts.bruising.sum())
+    assert s["peak_contact_force"] == r.impacts.peak_force.max()

@@ -84,7 +84,7 @@ def test_model_doc_and_code_cite_the_same_sections():
     assert derivation <= cited, f"sections no code cites: {sorted(derivation - cited)}"
 
 
-@pytest.mark.parametrize("pattern", [r"(?<!\w)pedicel_force", r"(?<!\w)n_berries_over", r"(?<!\w)energy_dissipated(_j)?\b",
+@pytest.mark.parametrize("pattern", [r"(?<!\w)pedicel_force", r"(?<!\w)n_berries_over", r"(?<!\w)energy_dissipated",
                                      r"(?<!\w)pair_idx", r"(?<!\w)pair_par", r"(?<!\w)time_s\b", r"[a-z]_n\b"])
 def test_one_name_per_concept(pattern):
     """Retired synonyms (pedicel force for the pedicel tension, energy_dissipated for dissipated_energy, unit

@@ -26,7 +26,7 @@ from builtin_interfaces.msg import Time
 
 from grapefmu.model.excitation import pick_and_place
 from grapefmu.physics.excitation import accel
-from grapefmu.recording.stamps import to_ns
+from grapefmu.recording.stamps import split, to_ns
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
 MOVES = [((0.0, 0.10), 0.4), ((0.30, 0.0), 0.6), ((0.0, -0.10), 0.4)]
@@ -116,8 +116,8 @@ class HarvestController(Node):
             self.rate += (target - self.rate) * min(1.0, self.dt / tau)
         a = accel(self.profile, self.s) * self.rate**2 if self.s < self.t_move_end else (0.0, 0.0)
         msg = AccelStamped()
-        ns = to_ns(t)
-        msg.header.stamp = Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+        sec, nanosec = split(to_ns(t))
+        msg.header.stamp = Time(sec=sec, nanosec=nanosec)
         msg.header.frame_id = "rachis"
         msg.accel.linear.x, msg.accel.linear.z = float(a[0]), float(a[1])
         self.pub.publish(msg)

@@ -22,6 +22,7 @@ from std_srvs.srv import SetBool, Trigger
 from grapefmu import GrapefmuError, Solver, load_scene
 from grapefmu.scenefile import default_scene_path
 from grapefmu.recording import messages as msgs
+from grapefmu.results.catalogue import on_topic
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
 
@@ -137,11 +138,11 @@ class SimulatorNode(Node):
             self.recorder.write(topic, message.__msgtype__, data, ns)
 
     # --- inputs ---------------------------------------------------------------------------------
-    def _valid(self, ax, ay, what) -> bool:
+    def _valid(self, ax, az, what) -> bool:
         bound = self.get_parameter("max_accel").value
-        if not (math.isfinite(ax) and math.isfinite(ay) and abs(ax) <= bound and abs(ay) <= bound):
+        if not (math.isfinite(ax) and math.isfinite(az) and abs(ax) <= bound and abs(az) <= bound):
             self.rejected += 1
-            self.get_logger().warning(f"{what}: acceleration ({ax!r}, {ay!r}) m/s² rejected: must be finite and "
+            self.get_logger().warning(f"{what}: acceleration ({ax!r}, {az!r}) m/s² rejected: must be finite and "
                                       f"within ±{bound:g} m/s²", throttle_duration_sec=1.0)
             return False
         return True
@@ -158,8 +159,8 @@ class SimulatorNode(Node):
         msg, t_in = self._received("rachis/accel", data)
         self._input(msg.accel.linear.x, msg.accel.linear.z, t_in, "rachis/accel")
 
-    def _input(self, ax, ay, t_in, what):
-        if not self._valid(ax, ay, what):
+    def _input(self, ax, az, t_in, what):
+        if not self._valid(ax, az, what):
             return
         if t_in < self.last_stamp:
             self.rejected += 1
@@ -173,7 +174,7 @@ class SimulatorNode(Node):
                     return
             else:
                 self.publish_state()  # an input at the current time still gets its answer
-        self.accel = (float(ax), float(ay))
+        self.accel = (float(ax), float(az))
 
     def on_pose(self, data: bytes):
         """Acceleration from poses: second difference, then a first-order low-pass at pose_filter_hz."""
@@ -229,17 +230,15 @@ class SimulatorNode(Node):
         wall_prev, cpu_prev = self._diag_last[0], self._diag_last[1]
         t = self.solver.t
         self._diag_last = (now, cpu, t)
-        tot = self.solver.totals()[0]
-        stats = self.solver.stats
-        detach = bool(tot["berries_over_detachment_force"])
-        bruising = int(tot["bruising_impacts"])
+        snap = self.solver.snapshot()
+        summary = {c.name: c.value(snap)[0].item() for c in on_topic("summary")}
+        detach, bruising = summary["detachment_risk"], summary["bruising_impacts"]
         values = {
             "sim_time_s": f"{t:.6f}", "real_time_factor": f"{(t - sim_prev) / max(now - wall_prev, 1e-9):.4f}",
             "cpu_percent": f"{100 * (cpu - cpu_prev) / max(now - wall_prev, 1e-9):.1f}", "overruns": self.overruns,
-            "rejected_inputs": self.rejected, "refused_steps": self.failures,
-            **{k: (f"{float(tot[k]):.6g}" if tot.dtype[k].kind == "f" else int(tot[k])) for k in tot.dtype.names},
-            "detachment_risk": detach, "zeno_guard_activations": stats["zeno_guard_activations"],
-            "paused": self.paused, "mode": self.mode,
+            "rejected_inputs": self.rejected, "refused_steps": self.failures, **summary,
+            "zeno_guard_activations": self.solver.stats["zeno_guard_activations"], "paused": self.paused,
+            "mode": self.mode,
         }
         warn = detach or bruising or self.rejected or self.failures
         level = 2 if self.failures else (1 if warn else 0)

@@ -13,6 +13,7 @@ from rosgraph_msgs.msg import Clock
 
 from grapefmu.recording import messages as msgs
 from grapefmu.recording.replay import iter_messages
+from grapefmu.recording.stamps import seconds
 from grapefmu.recording.typestore import serialize
 
 from .interfaces import message_class
@@ -61,7 +62,7 @@ def publish(path: str, rate: float = 1.0) -> int:
                         continue
                     t0 = r.log_time if t0 is None else t0
                     if rate > 0:
-                        delay = (r.log_time - t0) / 1e9 / rate - (time.monotonic() - wall0)
+                        delay = seconds(r.log_time - t0) / rate - (time.monotonic() - wall0)
                         if delay > 0:
                             time.sleep(delay)
                     clock.publish(serialize(msgs.clock(r.log_time)[1]))

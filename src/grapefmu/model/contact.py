@@ -70,7 +70,7 @@ def kelvin_voigt_damping_ratio(e: float) -> float:
 def kelvin_voigt_damping(e: float, stiffness: float, effective_mass: float) -> float:
     """c = 2 ζ(e) √(k m*). Under the no-tension clamp the realised e comes out higher
     (0.5 → about 0.55, 0.3 → about 0.40): the dashpot would pull during restitution and the
-    clamp forbids it (Schwager & Pöschel 2007). tests/test_contact_calibration.py measures it."""
+    clamp forbids it (Schwager & Pöschel 2007). tests/test_restitution.py measures it."""
     return 2.0 * kelvin_voigt_damping_ratio(e) * math.sqrt(stiffness * effective_mass)
 
 

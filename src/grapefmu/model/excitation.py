@@ -1,7 +1,7 @@
 """Base excitation: the acceleration a(t) = (a_x, a_z) of the rachis held by the gripper.
 
 Every kind compiles to one of three numeric forms that physics/excitation.py evaluates:
-a constant (also the zero-order hold the FMU and ROS node feed), a windowed chirp
+a constant, a windowed chirp
 (sine, sweep and half-sine impulse are chirps), or a piecewise-linear table
 (jerk-limited pick-and-place moves and CSV files). Each form lists its breakpoints,
 where a(t) or its derivative jumps; the solver lands a step on every one of them.
@@ -39,10 +39,10 @@ class Excitation:
     description: str = ""
 
 
-def constant(ax: float = 0.0, ay: float = 0.0) -> Excitation:
+def constant(ax: float = 0.0, az: float = 0.0) -> Excitation:
     par = np.zeros(6)
-    par[0], par[1] = ax, ay
-    return Excitation("none" if ax == ay == 0.0 else "constant",
+    par[0], par[1] = ax, az
+    return Excitation("none" if ax == az == 0.0 else "constant",
                       ExcitationArrays(CONSTANT, par, np.zeros((1, 3)), np.zeros(0)))
 
 
@@ -114,7 +114,7 @@ def pick_and_place(moves: list[tuple[tuple[float, float], float]], start: float 
 
 
 def read_csv(path: Path, key: str, hold: bool = False) -> Excitation:
-    """A CSV of time, ax, ay (header row allowed); linear in between (or held from each row to the
+    """A CSV of time, ax, az (header row allowed); linear in between (or held from each row to the
     next with hold = true, as a sampled controller output is), zero outside."""
     try:
         with open(path, newline="") as fh:
@@ -124,11 +124,11 @@ def read_csv(path: Path, key: str, hold: bool = False) -> Excitation:
     if raw and not _is_number(raw[0][0]):
         raw = raw[1:]
     if len(raw) < 2:
-        raise SceneError(key, f"{path}: need at least two rows of time, ax, ay")
+        raise SceneError(key, f"{path}: need at least two rows of time, ax, az")
     rows = []
     for n, r in enumerate(raw, start=1):
         if len(r) != 3 or not all(_is_number(c) for c in r):
-            raise SceneError(key, f"{path} row {n}: expected three numbers time, ax, ay, got {r!r}")
+            raise SceneError(key, f"{path} row {n}: expected three numbers time, ax, az, got {r!r}")
         vals = [float(c) for c in r]
         if not all(math.isfinite(v) for v in vals):
             raise SceneError(key, f"{path} row {n}: values must be finite, got {r!r}")

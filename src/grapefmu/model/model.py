@@ -127,7 +127,7 @@ class Model:
 
     @cached_property
     def arrays(self) -> ModelArrays:
-        dof = np.r_[0, np.cumsum([x.ndof for x in self.berries])].astype(np.int64)
+        dof = self.dof
         berry = np.zeros(self.n_berries, dtype=BERRY)
         for k, b in enumerate(self.berries):
             berry[k] = (b.mass, b.radius, b.twig_length, b.hinge_x, b.hinge_y, b.hinge_z, b.hinge_stiffness,

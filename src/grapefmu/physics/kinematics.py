@@ -109,9 +109,25 @@ def pair_state(y, M, pr, kin):
     return pair_gap(berry[pr.i], berry[pr.j], kin[pr.i], kin[pr.j])
 
 
-@jit
+def _padded(y, M):
+    """y = [q | q̇] (or longer) padded so that a planar berry's unused tilt reads stay inside it."""
+    out = np.zeros(max(len(y), 2 * M.n_dof + 2))
+    out[: len(y)] = y
+    return out
+
+
 def positions(y, M, out):
-    """Berry centres p_i (N, 3) in the rachis frame, for callers outside the compiled core."""
+    """Berry centres p_i (N, 3) in the rachis frame at y = [q | q̇ | ...], for callers outside the compiled core."""
+    _positions(_padded(y, M), M, out)
+
+
+def penetrations(y, M, out):
+    """δ of every candidate pair (P,) at y = [q | q̇ | ...] (negative: apart), for callers outside the compiled core."""
+    _penetrations(_padded(y, M), M, out)
+
+
+@jit
+def _positions(y, M, out):
     kin = np.zeros(M.berry.shape[0], dtype=KINEMATICS)
     kinematics(y, M, kin)
     for i in range(kin.shape[0]):
@@ -119,8 +135,7 @@ def positions(y, M, out):
 
 
 @jit
-def penetrations(y, M, out):
-    """δ of every candidate pair (P,) at state y (negative: apart), for callers outside the compiled core."""
+def _penetrations(y, M, out):
     kin = np.zeros(M.berry.shape[0], dtype=KINEMATICS)
     kinematics(y, M, kin)
     for p in range(M.pair.shape[0]):

@@ -38,7 +38,7 @@ def layout(n: int, d: int, c: int) -> Layout:
 
 
 #: the energy integrals that ride along in y, in the order ledger() returns them
-LEDGER_TERMS = ("dissipated_hinge", "dissipated_coupling", "dissipated_contact", "base_work")
+LEDGER_TERMS = ("dissipated_energy_hinge", "dissipated_energy_coupling", "dissipated_energy_contact", "base_work")
 
 
 def ledger(lay: Layout, y):

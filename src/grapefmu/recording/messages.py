@@ -26,7 +26,7 @@ from .typestore import header, msg
 
 FRAME = "rachis"
 WORLD = "world"
-CONTACT_FIELDS = ("pair_index", "contact_force", "penetration")
+CONTACT_FIELDS = ("pair", "contact_force", "penetration")
 IMPACT_FIELDS = ("pair", "onset", "end", "approach_speed", "separation_speed", "peak_force", "peak_time", "impulse",
                  "dissipated", "bruising")
 #: the summary topic's fields, in order
@@ -105,10 +105,10 @@ def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_
     """Rachis (origin to every hinge), twigs, berries and contact-force lines in the world frame (z up) for
     Foxglove or RViz: three line lists plus one sphere per berry, however many pairs the cluster has."""
     M = model.arrays
-    base = snap.base_displacement[k]
-    origin = np.array([base[0], 0.0, base[1]])
-    berries = snap.observation.position[k] + origin
-    hinges = np.column_stack([M.berry["hinge_x"], M.berry["hinge_y"], M.berry["hinge_z"]]) + origin
+    rachis = np.column_stack([M.berry["hinge_x"], M.berry["hinge_y"], M.berry["hinge_z"]])
+    frame = snap._replace(base_displacement=snap.base_displacement[k: k + 1])
+    origin, *hinges = catalogue.world(frame, np.vstack([np.zeros(3), rachis])[None])[0]
+    berries = catalogue.world(frame, snap.observation.position[k: k + 1])[0]
 
     def pt(v):
         return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import RecordingError
 from ..scenefile import parse_scene
-from .stamps import stamp_seconds
+from .stamps import seconds, stamp_seconds, to_ns
 
 
 @dataclass
@@ -107,7 +107,7 @@ def check(path: str | Path) -> CheckResult:
         run = simulate(scene, solver_cfg.get("t_end"), method=rec.metadata.get("method"), rtol=solver_cfg.get("rtol"),
                        atol=solver_cfg.get("atol"), output_interval=solver_cfg.get("output_interval"))
         for k, t in enumerate(run.t):
-            key = stamp_seconds(0, int(round(t * 1e9)))
+            key = seconds(to_ns(t))
             if key in recorded:
                 q, w = recorded[key]
                 dq = max(dq, float(np.abs(run.angles[k] - q).max()))

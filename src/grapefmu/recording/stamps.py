@@ -11,5 +11,10 @@ def seconds(ns: int) -> float:
     return ns / 1e9
 
 
+def split(ns: int) -> tuple[int, int]:
+    """(sec, nanosec) of a ROS time stamp, 0 ≤ nanosec < 1e9 (also before the epoch)."""
+    return divmod(int(ns), 1_000_000_000)
+
+
 def stamp_seconds(sec: int, nanosec: int) -> float:
     return seconds(sec * 1_000_000_000 + nanosec)

@@ -10,18 +10,17 @@ from __future__ import annotations
 
 import operator
 import os
-from contextlib import nullcontext
 from functools import cache
-from typing import IO, Any, Iterator, Mapping
+from typing import IO, Any, Mapping
 
 import numpy as np
-from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_typestore
 
 from .. import __version__
 from ..errors import RecordingError
+from .stamps import split
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
@@ -80,8 +79,8 @@ def msg(typename: str, **fields) -> Any:
 def stamp(ns: int) -> Any:
     """builtin_interfaces/msg/Time from integer nanoseconds. Floor division keeps 0 <= nanosec < 1e9,
     also before the epoch."""
-    ns = int(ns)
-    return TYPESTORE.types["builtin_interfaces/msg/Time"](sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    sec, nanosec = split(ns)
+    return TYPESTORE.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
 def header(ns: int, frame_id: str = "") -> Any:
@@ -164,14 +163,3 @@ class McapWriter:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-def read_messages(source: str | os.PathLike | IO[bytes], topics=None) -> Iterator[tuple[str, str, int, Any]]:
-    """Yield (topic, typename, log_time_ns, message) in log-time order, decoded through TYPESTORE and not through the
-    file's schemas. A recording from another ROS distro whose types differ would fail here, and that is on purpose."""
-    opened = open(source, "rb") if isinstance(source, (str, os.PathLike)) else nullcontext(source)
-    with opened as fh:
-        for sch, ch, m in make_reader(fh).iter_messages(topics=topics, log_time_order=True):
-            if sch is None or ch.message_encoding != "cdr":
-                raise RecordingError(f"topic {ch.topic!r} is not a ROS 2 CDR channel")
-            yield ch.topic, sch.name, m.log_time, deserialize(m.data, sch.name)

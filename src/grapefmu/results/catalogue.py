@@ -16,7 +16,6 @@ import numpy as np
 from ..model.model import Model
 from ..physics.layout import LEDGER_TERMS
 from ..physics.observe import ENERGY_TERMS, Observation
-from .records import TOTALS
 
 #: a scene with more candidate pairs than this (a cluster) reports pairs only while in contact
 PER_PAIR_LIMIT = 16
@@ -63,11 +62,16 @@ class Channel:
         return f"{self.name}_{element}" if element else self.name
 
 
+def world(s: Snapshot, points: np.ndarray) -> np.ndarray:
+    """Points (S, K, 3) in the rachis frame moved to the world frame by the rachis' displacement (x, z)."""
+    out = np.array(points, dtype=float)
+    out[..., 0] += s.base_displacement[:, None, 0]
+    out[..., 2] += s.base_displacement[:, None, 1]
+    return out
+
+
 def _world(axis: int) -> Callable[[Snapshot], np.ndarray]:
-    def value(s: Snapshot) -> np.ndarray:
-        base = {0: s.base_displacement[:, 0], 1: 0.0, 2: s.base_displacement[:, 1]}[axis]
-        return s.observation.position[:, :, axis] + np.asarray(base)[..., None]
-    return value
+    return lambda s: world(s, s.observation.position)[:, :, axis]
 
 
 def _total(field: str) -> Callable[[Snapshot], np.ndarray]:
@@ -83,9 +87,19 @@ def _largest(values: Callable[[Snapshot], np.ndarray]) -> Callable[[Snapshot], n
     return lambda s: values(s).max(axis=1, initial=0.0) if values(s).shape[1] else np.zeros(len(s.t))
 
 
+def dissipated(s: Snapshot) -> np.ndarray:
+    """Energy dissipated so far by hinges, couplings and contacts (J)."""
+    return s.ledger[:, :3].sum(axis=1)
+
+
+def stored(s: Snapshot) -> np.ndarray:
+    """The stored energy terms' sum (J)."""
+    return s.observation.energy.sum(axis=1)
+
+
 def _balance(s: Snapshot) -> np.ndarray:
     """stored + dissipated − work done by the base: constant in exact arithmetic."""
-    return s.observation.energy.sum(axis=1) + s.ledger[:, :3].sum(axis=1) - s.ledger[:, 3]
+    return stored(s) + dissipated(s) - s.ledger[:, 3]
 
 
 _force = lambda s: s.observation.contact_force  # noqa: E731
@@ -132,13 +146,13 @@ CHANNELS: tuple[Channel, ...] = (
     Channel("peak_pedicel_tension", "N", "cluster", "real", "Largest pedicel tension so far",
             _peak("peak_pedicel_tension", _max_tension), "summary"),
     Channel("dissipated_energy", "J", "cluster", "real", "Energy dissipated so far by hinges, couplings and contacts",
-            lambda s: s.ledger[:, :3].sum(axis=1), "summary"),
+            dissipated, "summary"),
     *(Channel(f"energy_{k}", "J", "cluster", "real", f"Stored energy: {k.replace('_', ' ')}",
               lambda s, k=k: s.observation.energy[:, ENERGY_TERMS.index(k)], fmu=False) for k in ENERGY_TERMS),
-    *(Channel(f"energy_{k}", "J", "cluster", "real", f"Energy ledger: {k.replace('_', ' ')} so far",
+    *(Channel(k, "J", "cluster", "real", f"Energy ledger: {k.replace('_', ' ')} so far",
               lambda s, k=k: s.ledger[:, LEDGER_TERMS.index(k)], fmu=False) for k in LEDGER_TERMS),
     Channel("energy_stored", "J", "cluster", "real", "Stored energy: the sum of the stored terms",
-            lambda s: s.observation.energy.sum(axis=1), fmu=False),
+            stored, fmu=False),
     Channel("energy_residual", "J", "cluster", "real",
             "What the energy ledger fails to account for since the first sample (docs/model.md §5)",
             lambda s: _balance(s) - _balance(s)[:1], fmu=False),
@@ -169,10 +183,6 @@ def table(snap: Snapshot, model: Model, pairs: list[int] | None = None,
         for k in idx:
             cols[c.column(names[k])] = v[:, k]
     return cols
-
-
-def totals_empty(n: int = 1) -> np.ndarray:
-    return np.zeros(n, dtype=TOTALS)
 
 
 def markdown() -> str:

@@ -47,7 +47,7 @@ def plot_run(run: Run, path: str | Path, title: str | None = None) -> None:
     e = run.energy
     for k in ("kinetic", "gravity", "hinge_elastic", "contact_elastic"):
         ax[3].plot(t, e[k] * 1e3, label=k.replace("_", " "))
-    ax[3].plot(t, (e["dissipated_hinge"] + e["dissipated_coupling"] + e["dissipated_contact"]) * 1e3,
+    ax[3].plot(t, run.dissipated * 1e3,
                label="dissipated", ls="--")
     ax[3].plot(t, e["base_work"] * 1e3, label="work by base", ls=":")
     ax[3].set_ylabel("energy (mJ)")
@@ -84,7 +84,7 @@ def plot_cluster(run: Run, path: str | Path, title: str | None = None) -> None:
     k_max = int(np.argmax(moved))
     for col, (k, label) in enumerate(((0, "t = 0"), (k_max, f"largest swing, t = {t[k_max]:.3f} s"))):
         ax = fig.add_subplot(grid[0, col], projection="3d")
-        r = run.scene.model.arrays.radius
+        r = run.scene.model.arrays.berry["radius"]
         ax.scatter(pos[k, :, 0], pos[k, :, 1], pos[k, :, 2], s=(r / r.max()) ** 2 * 60,
                    c=run.pedicel_tension[k], cmap="viridis", depthshade=False)
         ax.set_title(f"berries, {label} (colour: pedicel tension)", fontsize=9)
@@ -116,7 +116,7 @@ def plot_cluster(run: Run, path: str | Path, title: str | None = None) -> None:
     e = run.energy
     for k in ("kinetic", "gravity", "hinge_elastic", "contact_elastic"):
         ax.plot(t, e[k] * 1e3, label=k.replace("_", " "))
-    ax.plot(t, (e["dissipated_hinge"] + e["dissipated_coupling"] + e["dissipated_contact"]) * 1e3, ls="--",
+    ax.plot(t, run.dissipated * 1e3, ls="--",
             label="dissipated")
     ax.plot(t, e["base_work"] * 1e3, ls=":", label="work by base")
     ax.set_ylabel("energy (mJ)")

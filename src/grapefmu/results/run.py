@@ -14,7 +14,7 @@ import numpy as np
 from ..model.model import Scene
 from ..physics import observe as obs
 from ..physics.damage import detaching, fatigue
-from ..physics.layout import Layout, ledger, layout
+from ..physics.layout import LEDGER_TERMS, Layout, ledger, layout
 from . import catalogue
 from .impacts import Impacts
 
@@ -58,7 +58,7 @@ class Run:
     @property
     def active_pairs(self) -> np.ndarray:
         """Pairs in contact at each sample."""
-        return (self.mode != 0).sum(axis=1)
+        return catalogue.channel("active_pairs").value(self.snapshot())
 
     # --- observation ------------------------------------------------------------------------------
     @cached_property
@@ -105,14 +105,15 @@ class Run:
     def energy(self) -> dict[str, np.ndarray]:
         """The energy ledger (J): stored terms, dissipated so far, work done by the base, `stored` and
         `residual` (stored + dissipated − work − the same at the first sample), from the catalogue."""
-        cols = catalogue.table(self.snapshot(), self.scene.model, only=[c for c in catalogue.CHANNELS
-                                                                          if c.name.startswith("energy_")])
-        return {k.removeprefix("energy_"): v for k, v in cols.items()}
+        terms = [*(f"energy_{k}" for k in obs.ENERGY_TERMS), *LEDGER_TERMS, "energy_stored", "energy_residual"]
+        cols = catalogue.table(self.snapshot(), self.scene.model, only=[catalogue.channel(k) for k in terms])
+        # the ledger's own short names: kinetic, ..., dissipated_hinge, ..., base_work, stored, residual
+        return {k.removeprefix("energy_").replace("dissipated_energy_", "dissipated_"): v for k, v in cols.items()}
 
     @property
     def dissipated(self) -> np.ndarray:
         """Energy dissipated so far by hinges, couplings and contacts, J."""
-        return self.ledger[:, :3].sum(axis=1)
+        return catalogue.dissipated(self.snapshot())
 
     def ledger_error(self) -> float:
         """Largest ledger residual relative to the largest energy that moved through the system."""
@@ -140,19 +141,21 @@ class Run:
         """The catalogue's cluster channels at the end of the run, the berries over the detachment force,
         impact and per-berry figures, and what the solver did."""
         th = self.scene.thresholds
-        snap = self.snapshot()
-        last = {c.name: c.value(snap)[-1].item() for c in catalogue.CHANNELS
-                if c.per == "cluster" and c.topic == "summary"}
         imp = self.impacts
         per_berry = self.dissipated_per_berry()
         names = self.scene.model.names
+        over = detaching(self.peak_tension, th.detachment_force)
+        # the run's end state (its impact book and peaks), not its last sample, which may lie before the end
         return {
             "t_end": float(self.t[-1]), "samples": len(self.t), "berries": self.scene.model.n_berries,
-            **{k: last[k] for k in ("collision_count", "bruising_impacts", "peak_contact_force", "peak_pedicel_tension",
-                                    "dissipated_energy", "berries_over_detachment_force", "detachment_risk")},
-            "detached_berries": [names[i] for i in np.flatnonzero(detaching(self.peak_tension, th.detachment_force))],
+            "collision_count": len(imp), "bruising_impacts": int(imp.bruising.sum()),
+            "peak_contact_force": float(self.peak_force.max(initial=0.0)),
+            "peak_pedicel_tension": float(self.peak_tension.max()),
+            "dissipated_energy": float(self.dissipated[-1]),
+            "berries_over_detachment_force": int(over.sum()), "detachment_risk": bool(over.any()),
+            "detached_berries": [names[i] for i in np.flatnonzero(over)],
             "fatigue_impacts": int(fatigue(imp.peak_force, th.bruise_force, th.fatigue_fraction).sum()),
-            "damage_risk": bool(last["bruising_impacts"]),
+            "damage_risk": bool(imp.bruising.any()),
             "max_impact_energy": float(imp.dissipated.max()) if len(imp) else 0.0,
             "max_dissipated_per_berry": float(per_berry.max()),
             "mean_dissipated_per_berry": float(per_berry.mean()),

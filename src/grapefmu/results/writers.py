@@ -1,4 +1,4 @@
-"""Write a run to CSV or Parquet (grapefmu.write_run picks the writer by file type). Every writer goes through a temporary file and a rename,
+"""Write a run to CSV or Parquet (grapefmu.write.write_run picks the writer by file type). Every writer goes through a temporary file and a rename,
 so an interrupted write never leaves a half-written file under the requested name."""
 from __future__ import annotations
 
@@ -12,8 +12,6 @@ from pathlib import Path
 import numpy as np
 
 from .run import Run
-
-CSV_CORE = ("time", "angle_", "angular_velocity_", "pedicel_tension_", "contact_force_", "penetration_")
 
 
 @contextlib.contextmanager
@@ -35,8 +33,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 
 
 def write_csv(run: Run, path: str | Path) -> None:
-    """The CSV columns the issue names (time, angles, rates, pedicel and contact forces, penetration)
-    followed by positions, base acceleration and the energy ledger."""
+    """time, then every output channel (docs/outputs.md; per pair only the pairs that touched)."""
     cols = run.columns()
     names = list(cols)
     data = np.column_stack([cols[k] for k in names])

@@ -286,7 +286,7 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
     if kind == "csv":
         f = raw.get("file")
         if not isinstance(f, str):
-            raise SceneError(f"{key}.file", f"expected a path to a CSV of time, ax, ay, got {f!r}")
+            raise SceneError(f"{key}.file", f"expected a path to a CSV of time, ax, az, got {f!r}")
         ex = exc.read_csv(base_dir / f, f"{key}.file", v.boolean(f"{key}.hold", raw.get("hold", False)))
         if abs(ex.arrays.table[:, 1:]).max() > acc:
             raise SceneError(f"{key}.file", f"accelerations must stay within ±{acc:g} m/s²")

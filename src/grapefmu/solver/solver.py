@@ -33,8 +33,6 @@ from .events import classify
 from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, STEP_UNDERFLOW, integrate
 from .tableau import BOGACKI_SHAMPINE, DOPRI5
 
-#: MATLAB ode23's default tolerances, used by the paper method unless told otherwise.
-PAPER_RTOL, PAPER_ATOL = 1e-3, 1e-6
 #: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
 #: wider means fewer rebuilds but more near pairs to watch on every step
 SKIN_FRACTION = 0.5

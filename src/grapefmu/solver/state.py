@@ -110,7 +110,7 @@ def _walk(tree, prefix=""):
 
 
 def flatten(state: SolverState) -> dict[str, np.ndarray]:
-    """Every array of the state by its dotted name ("physical.y", "book.zeno.ring", ...)."""
+    """Every array of the state by its dotted name ("physical.y", "book.ring", ...)."""
     return dict(_walk(state))
 
 
