@@ -17,7 +17,6 @@ import numpy as np
 from grapefmu import GrapefmuError, Solver
 from grapefmu.errors import StateError
 from grapefmu.model.contact import LAWS, Law
-from grapefmu.results.catalogue import table
 from grapefmu.scenefile import parse_scene, scene_from_dict
 from grapefmu.solver import state as solver_state
 from grapefmu.solver.solver import MAX_ACCEL
@@ -41,6 +40,12 @@ class FmuCore:
             raise GrapefmuError(f"{OUTPUTS_FILE}: expected one of {OUTPUT_SETS}, got {self.outputs!r}")
         self.full = self.outputs == "full"
         self.vars: list[Var] = variables(self.model, self.outputs)
+        cast = {"real": float, "integer": int, "boolean": bool}
+        plan: dict = {}
+        for v in self.vars:
+            if v.channel is not None and v.causality == "output":
+                plan.setdefault(v.channel.name, (v.channel, []))[1].append((v.name, v.element, cast[v.type]))
+        self._outputs = list(plan.values())  # (channel, [(variable, element, cast)]): what each step fills
         self.values: dict[str, float | int | bool] = self._start_values()
         self.solver: Solver | None = None
         self.error: str | None = None
@@ -143,13 +148,13 @@ class FmuCore:
         return None
 
     def _update_outputs(self) -> None:
-        """Every output from the catalogue, computed from the solver's snapshot."""
-        cast = {"real": float, "integer": int, "boolean": bool}
+        """Every output from the catalogue: each channel evaluated once on the solver's snapshot."""
         snap = self.solver.snapshot()
-        outputs = [v for v in self.vars if v.channel is not None and v.causality == "output"]
-        cols = table(snap, self.model, only=list({v.channel.name: v.channel for v in outputs}.values()))
-        for v in outputs:
-            self.values[v.name] = cast[v.type](cols[v.name][0])
+        values = self.values
+        for channel, targets in self._outputs:
+            v = np.asarray(channel.value(snap))[0]
+            for name, k, cast in targets:
+                values[name] = cast(v[k] if v.ndim else v)
 
     # --- FMU state --------------------------------------------------------------------------------
     def get_state(self) -> dict:
