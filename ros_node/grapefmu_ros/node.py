@@ -22,7 +22,6 @@ from std_srvs.srv import SetBool, Trigger
 from grapefmu import GrapefmuError, Solver, load_scene
 from grapefmu.scenefile import default_scene_path
 from grapefmu.recording import messages as msgs
-from grapefmu.results.catalogue import on_topic
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
 
@@ -125,7 +124,9 @@ class SimulatorNode(Node):
         markers_due = rate > 0 and t - self._last_marker >= 1.0 / rate - 1e-12
         if markers_due:
             self._last_marker = t
-        for topic, m in msgs.state_messages(self.scene.model, self.solver.snapshot(), 0, ns, markers=markers_due):
+        snap = self.solver.snapshot()
+        summary = msgs.summary_table(snap)
+        for topic, m in msgs.state_messages(self.scene.model, snap, 0, ns, summary, markers=markers_due):
             self.emit(topic, m, ns)
         if "/clock" in self.pubs:
             self.emit(*msgs.clock(ns), ns)
@@ -230,9 +231,8 @@ class SimulatorNode(Node):
         wall_prev, cpu_prev = self._diag_last[0], self._diag_last[1]
         t = self.solver.t
         self._diag_last = (now, cpu, t)
-        snap = self.solver.snapshot()
-        summary = {c.name: c.value(snap)[0].item() for c in on_topic("summary")}
-        detach, bruising = summary["detachment_risk"], summary["bruising_impacts"]
+        summary = dict(zip(msgs.SUMMARY_FIELDS[1:], msgs.summary_table(self.solver.snapshot())[0, 1:].tolist()))
+        detach, bruising = bool(summary["detachment_risk"]), int(summary["bruising_impacts"])
         values = {
             "sim_time_s": f"{t:.6f}", "real_time_factor": f"{(t - sim_prev) / max(now - wall_prev, 1e-9):.4f}",
             "cpu_percent": f"{100 * (cpu - cpu_prev) / max(now - wall_prev, 1e-9):.1f}", "overruns": self.overruns,

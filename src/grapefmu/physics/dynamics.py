@@ -7,11 +7,13 @@ the energy integrals that ride along in y (physics/layout.py).
 from __future__ import annotations
 
 import numba as nb
+import numpy as np
 
 from .compiled import jit
-from .excitation import applied_accel
+from ..model.excitation import constant
+from .excitation import applied_accel, held
 from .forces import forces, generalized_forces, hinge_torque
-from .kinematics import kinematics
+from .kinematics import kinematics, workspace
 
 
 @jit
@@ -84,12 +86,6 @@ __all__ = ["rhs", "rhs_inline"]
 def derivative(M, y, contacts, accel=(0.0, 0.0), t: float = 0.0):
     """dy/dt at one state for callers outside the compiled core (tests, checks): every pair evaluated,
     contacts a (P,) forces.CONTACT array, the rachis acceleration accel = (a_x, a_z) held."""
-    import numpy as np
-
-    from ..model.excitation import constant
-    from .excitation import held
-    from .kinematics import workspace
-
     dy = np.zeros_like(y)
     rhs(t, t, y, dy, contacts, M, constant().arrays, held(*accel)[0], workspace(M), np.arange(M.pair.shape[0]),
         M.pair.shape[0])

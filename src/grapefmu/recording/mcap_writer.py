@@ -26,11 +26,12 @@ def run_metadata(run: Run) -> dict[str, str]:
 def write_mcap(run: Run, path: str | Path) -> None:
     model = run.scene.model
     snap = run.snapshot()
+    summary = messages.summary_table(snap)
     timed = []  # (ns, order, topic, message): state topics first at each stamp, impacts last
     for k, t in enumerate(run.t):
         ns = to_ns(float(t))
         timed.append((ns, 0, *messages.accel(ns, run.accel[k])))
-        timed += [(ns, 1, topic, m) for topic, m in messages.state_messages(model, snap, k, ns)]
+        timed += [(ns, 1, topic, m) for topic, m in messages.state_messages(model, snap, k, ns, summary)]
     timed += [(ns, 2, topic, m) for ns, topic, m in messages.impact_messages(run.impacts)]
     timed.sort(key=lambda x: (x[0], x[1]))
     with atomic_path(path) as tmp, McapWriter(tmp) as wr:

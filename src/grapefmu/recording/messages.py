@@ -70,8 +70,14 @@ def clock(ns: int):
     return "/clock", msg("rosgraph_msgs/msg/Clock", clock=header(ns).stamp)
 
 
-def state_messages(model: Model, snap: catalogue.Snapshot, k: int, ns: int, *, markers: bool = False) -> list:
-    """(topic, message) of every state topic at sample k of snap, stamped ns."""
+def summary_table(snap: catalogue.Snapshot) -> np.ndarray:
+    """(S, len(SUMMARY_FIELDS)): the summary topic's rows, each channel evaluated once over all samples."""
+    return np.column_stack([snap.t, *(np.asarray(c.value(snap), dtype=float) for c in catalogue.on_topic("summary"))])
+
+
+def state_messages(model: Model, snap: catalogue.Snapshot, k: int, ns: int, summary: np.ndarray, *,
+                   markers: bool = False) -> list:
+    """(topic, message) of every state topic at sample k of snap, stamped ns; `summary` is summary_table(snap)."""
     obs = snap.observation
     dof_joints = [f"twig_{n}" for n in model.dof_names]
     out = [("joint_states", msg("sensor_msgs/msg/JointState", header=header(ns, FRAME), name=dof_joints,
@@ -87,8 +93,7 @@ def state_messages(model: Model, snap: catalogue.Snapshot, k: int, ns: int, *, m
     touching = np.flatnonzero(snap.in_contact[k])
     out.append(("contacts", labelled(CONTACT_FIELDS, np.column_stack(
         [touching, force[touching], obs.penetration[k, touching]]), rows=len(touching))))
-    out.append(("summary", labelled(SUMMARY_FIELDS, [snap.t[k], *(
-        float(np.asarray(c.value(snap))[k]) for c in catalogue.on_topic("summary"))])))
+    out.append(("summary", labelled(SUMMARY_FIELDS, summary[k])))
     if markers:
         out.append(("markers", marker_array(model, snap, k, ns)))
     return out

@@ -84,7 +84,7 @@ def _peak(field: str, now: Callable[[Snapshot], np.ndarray]) -> Callable[[Snapsh
 
 
 def _largest(values: Callable[[Snapshot], np.ndarray]) -> Callable[[Snapshot], np.ndarray]:
-    return lambda s: values(s).max(axis=1, initial=0.0) if values(s).shape[1] else np.zeros(len(s.t))
+    return lambda s: values(s).max(axis=1, initial=0.0)
 
 
 def dissipated(s: Snapshot) -> np.ndarray:

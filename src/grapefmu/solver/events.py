@@ -195,14 +195,7 @@ def switch_pair(p, new_mode, t, delta_dot, contacts, Bk, cfg, impacts, cursor):
     tot = Bk.totals[0]
     if old == 0:
         c.v_onset = max(delta_dot, HC_MIN_APPROACH_SPEED)
-        bp.onset = t
-        bp.approach_speed = delta_dot
-        bp.impact_peak = 0.0
-        bp.impact_peak_time = t
-        bp.impulse_at_onset = bp.impulse
-        bp.dissipated_at_onset = bp.dissipated
-        bp.bruising = False
-        tot.collision_count += 1
+        open_impact(bp, tot, t, delta_dot)
     elif new_mode == 0:
         cur = cursor[0]
         row = impacts[cur.n_impacts]
@@ -232,6 +225,19 @@ def switch_pair(p, new_mode, t, delta_dot, contacts, Bk, cfg, impacts, cursor):
         c.smooth = True
         bp.smooth_until = t + cfg.zeno_window
         Bk.counters[0].zeno_activations += 1
+
+
+@inline
+def open_impact(bp, tot, t, approach_speed):
+    """A pair (bp, its BOOK_PAIR record) comes into contact at t: its impact starts and is counted."""
+    bp.onset = t
+    bp.approach_speed = approach_speed
+    bp.impact_peak = 0.0
+    bp.impact_peak_time = t
+    bp.impulse_at_onset = bp.impulse
+    bp.dissipated_at_onset = bp.dissipated
+    bp.bruising = False
+    tot.collision_count += 1
 
 
 @inline

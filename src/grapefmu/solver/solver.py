@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import SolverError, StateError
+from ..errors import SolverError
 from ..model.contact import HC_MIN_APPROACH_SPEED, Law
 from ..model.model import Scene
 from ..physics import observe as obs
@@ -29,7 +29,7 @@ from ..results.records import concat
 from ..results.run import Run
 from . import state as st
 from .broadphase import rebuild
-from .events import classify
+from .events import classify, open_impact
 from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, STEP_UNDERFLOW, integrate
 from .tableau import BOGACKI_SHAMPINE, DOPRI5
 
@@ -57,11 +57,7 @@ def _start(S, M, X, skin):
         mode, ddot = classify(p, S.physical.y, M, C, W.berry, 0)
         C[p].mode = mode
         if mode != 0:
-            bp = S.book.pair[p]
-            bp.onset = t
-            bp.approach_speed = ddot
-            bp.impact_peak_time = t
-            S.book.totals[0].collision_count += 1
+            open_impact(S.book.pair[p], S.book.totals[0], t, ddot)
     kinematics(S.physical.y, M, W.berry)
     rebuild(M, C, S.book, S.broad_phase, W.berry, skin)
     S.book.counters[0].near_list_rebuilds = 0
@@ -148,10 +144,7 @@ class Solver:
     def set_state(self, state: st.SolverState) -> None:
         """Restore a state from get_state of a solver of the same scene and method; anything else, or a
         corrupted state, is refused with a StateError naming the field, and the solver keeps its own."""
-        st.check(state, self.state)
-        n_break = self.excitation.breaks.shape[0]
-        if int(state.integrator.clock["break_index"][0]) > n_break:
-            raise StateError(f"state integrator.clock.break_index: beyond the excitation's {n_break} breakpoints")
+        st.check(state, self.state, self.excitation.breaks.shape[0])
         self.state = st.copy(state)
 
     @property

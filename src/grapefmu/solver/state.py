@@ -153,10 +153,10 @@ def _fields(a: np.ndarray):
 MAY_BE_INFINITE = {"book.ring", "book.peak_tension", "book.totals.peak_pedicel_tension", "book.pair.smooth_until"}
 
 
-def check(state, template: SolverState) -> None:
-    """Refuse, naming the field, a state that does not fit the solver whose fresh state is `template`
-    (another scene, another method, another layout) or holds values the compiled core cannot trust
-    (NaN, out-of-range indices and modes). Raises StateError; nothing is changed."""
+def check(state, template: SolverState, n_breaks: int) -> None:
+    """Refuse, naming the field, a state that does not fit the solver whose fresh state is `template` and
+    whose excitation has n_breaks breakpoints (another scene, another method, another layout) or holds
+    values the compiled core cannot trust (NaN, out-of-range indices and modes). Raises StateError."""
     from ..errors import StateError
 
     if not isinstance(state, SolverState):
@@ -201,8 +201,9 @@ def check(state, template: SolverState) -> None:
     if ((ring_pos < 0) | (ring_pos >= state.book.ring.shape[1])).any():
         raise StateError(f"state book.pair.ring_pos: outside [0, {state.book.ring.shape[1]})")
     clock = state.integrator.clock[0]
-    if clock["h"] < 0 or clock["break_index"] < 0:
-        raise StateError("state integrator.clock: the step size and breakpoint index must be ≥ 0")
+    if clock["h"] < 0 or not 0 <= clock["break_index"] <= n_breaks:
+        raise StateError(f"state integrator.clock: the step size must be ≥ 0 and the breakpoint index within "
+                         f"[0, {n_breaks}]")
     for f in state.book.counters.dtype.names:
         if state.book.counters[f][0] < 0:
             raise StateError(f"state book.counters.{f}: must be ≥ 0")
