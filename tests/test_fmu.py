@@ -81,6 +81,59 @@ def test_description_units_version_and_capabilities(fmus):
     assert all(sv.get("description") for sv in root.iter("ScalarVariable"))
 
 
+def test_description_tells_the_truth(fmus):
+    """Outputs are calculated (no start value), depend on no input, the scene gives the default experiment,
+    and both versions say the step may vary (results do not depend on it: test below)."""
+    import tomllib
+    sv = tomllib.loads(default_scene_path().read_text(encoding="utf-8"))["solver"]
+    for fmi in (2, 3):
+        with zipfile.ZipFile(fmus / f"default{fmi}.fmu") as z:
+            root = ET.fromstring(z.read("modelDescription.xml"))
+        assert root.find("CoSimulation").get("canHandleVariableCommunicationStepSize") == "true"
+        ex = root.find("DefaultExperiment")
+        assert float(ex.get("stopTime")) == sv["t_end"] and float(ex.get("tolerance")) == sv["rtol"]
+        if fmi == 2:
+            outs = [sv_ for sv_ in root.iter("ScalarVariable") if sv_.get("causality") == "output"]
+            assert all(o.get("initial") == "calculated" and o[0].get("start") is None for o in outs)
+            unknowns = root.find("ModelStructure/Outputs")
+            assert len(unknowns) == len(outs) and all(u.get("dependencies") == "" for u in unknowns)
+            assert len(root.find("ModelStructure/InitialUnknowns")) == len(outs)
+        else:
+            outs = [v for v in root.find("ModelVariables") if v.get("causality") == "output"]
+            assert all(o.get("initial") == "calculated" and o.get("start") is None for o in outs)
+            deps = root.find("ModelStructure").findall("Output")
+            assert len(deps) == len(outs) and all(d.get("dependencies") == "" for d in deps)
+
+
+def test_initial_state_is_set_by_parameters_and_damping_has_one_setting(fmus):
+    code = f"""
+import sys
+sys.path.insert(0, {str(ROOT)!r})
+from tests.fmu_driver import Fmu2
+from fmpy.fmi1 import FMICallException
+path = {str(fmus / 'default2.fmu')!r}
+f = Fmu2(path, params={{"initial_angle_left": 0.2, "initial_angular_velocity_right": -1.0}})
+print("START", f.get(["angle_left", "angular_velocity_right"]) + Fmu2(path, "rest").get(["pedicel_tension_left"]))
+for name, params in (("both", {{"restitution": 0.5, "contact_damping": 1.0}}),
+                     ("hertz", {{"contact_law": 1, "restitution": 0.5}})):
+    try:
+        Fmu2(path, name, params=params)
+        print("RESULT", name, "ok")
+    except FMICallException as e:
+        print("RESULT", name, e)
+sys.stdout.flush()
+import os
+os._exit(0)  # see docs/fmu.md: pythonfmu's teardown at interpreter exit
+"""
+    out = run("-c", code)
+    start = eval(out.stdout.split("START", 1)[1].splitlines()[0])
+    assert start[:2] == [0.2, -1.0]
+    assert abs(start[2] - 0.011 * 9.81) < 1e-9  # a berry at rest hangs on its pedicel, read right after initialization
+    assert "RESULT both fmi2ExitInitializationMode failed with status 3" in out.stdout
+    assert "RESULT hertz fmi2ExitInitializationMode failed with status 3" in out.stdout
+    assert "set one of them" in out.stdout + out.stderr and "has no damping" in out.stdout + out.stderr
+
+
 def test_fmpy_matches_grapefmu_simulate(fmus, reference):
     res = drive("fmpy", fmus / "default2.fmu", fmus / "signal.csv", STOP, 1e-3)
     ty = np.array(res["t_y"])
@@ -114,7 +167,7 @@ def test_two_instances_in_one_process_are_independent(fmus):
 def test_bad_input_is_refused_not_fatal_and_leaves_the_state(fmus):
     r = drive("bad", fmus / "default2.fmu")
     for label in ("nan input", "inf input", "huge input", "zero step", "negative step", "bad parameter"):
-        assert "status 2 (discard)" in r[label], (label, r[label])  # pythonfmu's FMI 2 wrapper: refused step
+        assert "status 3 (error)" in r[label], (label, r[label])
         if label != "bad parameter":
             assert r[label + " unchanged"]
     assert r["recovers"]
@@ -132,9 +185,8 @@ vr = {{v.name: v.valueReference for v in md.modelVariables}}
 f = FMU3Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier, instanceName='a')
 f.instantiate(loggingOn=True)
 f.enterInitializationMode(); f.exitInitializationMode()
-f.setFloat64([vr['base_ax']], [math.nan])
 try:
-    f.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
+    f.setFloat64([vr['base_ax']], [math.nan])
     print('RESULT ok')
 except FMICallException as e:
     print('RESULT', e)
@@ -143,7 +195,7 @@ f.doStep(currentCommunicationPoint=0.0, communicationStepSize=1e-3)
 print('TIME', f.getFloat64([vr['time']])[0])
 """
     out = run("-c", code).stdout
-    assert "RESULT fmi3DoStep failed with status 3 (error)" in out
+    assert "RESULT fmi3SetFloat64 failed with status 3 (error)" in out
     assert "TIME 0.001" in out
 
 

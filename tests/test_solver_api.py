@@ -212,3 +212,15 @@ def test_fuzzed_states_are_refused_or_integrate_cleanly(collision_scene):
         s.set_state(good)
     print(outcomes)
     assert outcomes["refused"] > 10 and outcomes["integrated"] > 10
+
+
+def test_a_state_belongs_to_its_scene_in_every_process():
+    """The fingerprint is a function of the scene alone (once it hashed a record's uninitialised padding,
+    so a state saved by one process was refused by another)."""
+    import subprocess
+    import sys
+    code = ("import grapefmu; s = grapefmu.load_scene(grapefmu.scenefile.default_scene_path()); "
+            "print(grapefmu.Solver(s).state.fingerprint[0])")
+    prints = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+              for _ in range(3)}
+    assert len(prints) == 1

@@ -1,63 +1,172 @@
-"""What the FMI 2.0 and 3.0 slaves share: the core, the description, and the FMU-state hooks."""
+"""What the FMI 2.0 and 3.0 slaves share: the core, the description, the access rules and the FMU state.
+
+No method pythonfmu calls may raise: pythonfmu turns an exception into fmiFatal and drops the Python
+slave, so the host's next call would crash. Every refusal instead goes to the FMU's binary (shim.c)
+through `grapefmu_refuse(status, message)`, which logs the message and makes the current FMI call
+return that status; the slave's values and state stay as they were."""
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
-from grapefmu import __version__
+from grapefmu import GrapefmuError, __version__
 
 from .core import FmuCore
+from .report import stderr_refuse, refuse_function
+
+OK, WARNING, DISCARD, ERROR, FATAL = range(5)  # fmi2Status and fmi3Status share these codes
 
 
 def kinds(causality, variability, initial) -> dict[tuple[str, bool], dict]:
     """Registration keywords per (causality, is real) from one FMI version's enums (same member names
-    in FMI 2.0 and 3.0): inputs and outputs continuous when real, parameters fixed, outputs exact."""
+    in FMI 2.0 and 3.0): inputs and outputs continuous when real, parameters fixed, outputs calculated
+    (from the parameters at the end of initialization)."""
     out = {}
     for real in (True, False):
         var = variability.continuous if real else variability.discrete
         out["input", real] = {"causality": causality.input, "variability": var}
-        out["output", real] = {"causality": causality.output, "variability": var, "initial": initial.exact}
+        out["output", real] = {"causality": causality.output, "variability": var, "initial": initial.calculated}
         out["parameter", real] = {"causality": causality.parameter, "variability": variability.fixed,
                                   "initial": initial.exact}
     return out
 
 
+class Refusal:
+    """What _fmu_state_from_bytes returns for bytes it cannot trust: setting it is refused again."""
+
+    def __init__(self, message: str):
+        self.message = message
+
+
 class GrapeSlaveMixin:
     scene_file = "scene.toml"
-    TYPES: dict            # per FMI version: the variable class of each type
+    TYPES: dict            # per FMI version: the variable class of each of our types
+    ACCESS: dict           # per FMI version: {get/set method suffix: variable class} of every FMI type
     KINDS: dict            # per FMI version: kinds(...)
-    INITIAL: type          # per FMI version: its `initial` enum
+    EXPERIMENT: type       # per FMI version: its DefaultExperiment
     UNITS = False          # whether the version's variables carry a unit
+    _refuse_fn = staticmethod(stderr_refuse)
 
-    def _register(self, var) -> None:
-        kw = {"description": var.description, **self._accessors(var.name), **self.KINDS[var.causality, var.type == "real"]}
-        if var.channel is not None and var.causality == "output":
-            kw["initial"] = getattr(self.INITIAL, var.channel.fmi_initial)
-        if self.UNITS and var.type == "real" and var.unit not in ("", "1"):
-            kw["unit"] = var.unit
-        self.register_variable(self.TYPES[var.type](var.name, **kw))
+    def __init_subclass__(cls, **kw):
+        super().__init_subclass__(**kw)
+        for suffix, kind in cls.ACCESS.items() if "ACCESS" in cls.__dict__ else ():
+            setattr(cls, f"get_{suffix}", lambda self, vrs, kind=kind: self._get(vrs, kind))
+            setattr(cls, f"set_{suffix}", lambda self, vrs, values, kind=kind: self._set(vrs, values, kind))
 
+    # --- set-up -----------------------------------------------------------------------------------
     def _setup(self, kwargs) -> None:
-        self.core = FmuCore(Path(kwargs.get("resources") or ".") / self.scene_file)
+        resources = Path(kwargs.get("resources") or ".")
+        type(self)._refuse_fn = refuse_function(resources, type(self).__name__)
+        self.core = FmuCore(resources / self.scene_file)
         self.description = (f"grapefmu {__version__}: berries on hinged twigs that swing and collide under "
                             f"base excitation; scene '{self.core.scene.name}'")
         self.author = "grapefmu"
         self.version = __version__
         self.start_time = 0.0
+        sv = self.core.scene.solver
+        self.default_experiment = self.EXPERIMENT(start_time=0.0, stop_time=sv.t_end, step_size=sv.output_interval,
+                                                  tolerance=sv.rtol)
+        self.phase = "instantiated"  # -> "initialization" -> "step"
+
+    def _register(self, var) -> None:
+        kw = {"description": var.description, **self._accessors(var.name), **self.KINDS[var.causality, var.type == "real"]}
+        if self.UNITS and var.type == "real" and var.unit not in ("", "1"):
+            kw["unit"] = var.unit
+        self.register_variable(self.TYPES[var.type](var.name, **kw))
 
     def _accessors(self, name: str) -> dict:
         values = self.core.values
         return {"getter": lambda: values[name], "setter": lambda x: values.__setitem__(name, x)}
 
+    @classmethod
+    def _refuse(cls, message: str, status: int = ERROR) -> None:
+        cls._refuse_fn(status, message.encode("utf-8", "replace"))
+
+    # --- variable access --------------------------------------------------------------------------
+    def _variable(self, vr, kind, setting: bool):
+        """The variable behind value reference `vr` if this call may use it, else None (refused)."""
+        var = self.vars.get(vr)
+        what = kind.__name__
+        if var is None or not isinstance(var, kind):
+            self._refuse(f"value reference {vr} is not a {what} variable of this FMU")
+            return None
+        if not setting:
+            return var
+        c = var.causality.name
+        if c not in ("input", "parameter"):
+            self._refuse(f"{var.name} has causality {c}: only inputs and parameters can be set")
+            return None
+        if c == "parameter" and self.phase == "step":
+            self._refuse(f"{var.name} is a fixed parameter: it can be set only before exitInitializationMode")
+            return None
+        return var
+
+    def _get(self, vrs, kind) -> list:
+        out = []
+        for vr in vrs:
+            var = self._variable(vr, kind, False)
+            out.append(var.getter() if var is not None else "" if kind.__name__ == "String" else 0)
+        return out
+
+    def _set(self, vrs, values, kind) -> None:
+        if len(vrs) != len(values):
+            self._refuse(f"set{kind.__name__}: {len(vrs)} value references but {len(values)} values")
+            return
+        for vr, x in zip(vrs, values):
+            var = self._variable(vr, kind, True)
+            if var is None:
+                continue
+            problem = self.core.value_problem(var.name, x)
+            if problem:
+                self._refuse(problem)
+            else:
+                var.setter(x)
+
+    # --- modes and steps --------------------------------------------------------------------------
+    def enter_initialization_mode(self):
+        self.phase = "initialization"
+
+    def exit_initialization_mode(self):
+        err = self.core.initialize(self.start_time)
+        if err:
+            self._refuse(err)
+        else:
+            self.phase = "step"
+
+    def _step(self, current_time, step_size) -> bool:
+        """Integrate the communication step; False (refused, reported, state unchanged) when it cannot."""
+        try:
+            refusal = self.core.step(current_time, step_size)
+        except Exception as e:  # noqa: BLE001 - nothing may reach pythonfmu; this is a bug, reported as Error
+            refusal = (ERROR, f"doStep failed: {type(e).__name__}: {e}")
+        if refusal:
+            self._refuse(refusal[1], refusal[0])
+        return not refusal
+
+    # --- FMU state --------------------------------------------------------------------------------
     def _get_fmu_state(self):
         return self.core.get_state()
 
     def _set_fmu_state(self, state):
-        self.core.set_state(state)
+        if isinstance(state, Refusal):
+            self._refuse(f"setFMUState: {state.message}")
+            return
+        try:
+            self.core.set_state(state)
+        except GrapefmuError as e:
+            self._refuse(f"setFMUState refused, the FMU keeps its state: {e}")
+        except Exception as e:  # noqa: BLE001 - a state object the host made up
+            self._refuse(f"setFMUState refused, not a state of this FMU ({type(e).__name__}: {e})")
 
     @staticmethod
     def _fmu_state_to_bytes(state) -> bytes:
         return FmuCore.state_to_bytes(state)
 
-    @staticmethod
-    def _fmu_state_from_bytes(state: bytes):
-        return FmuCore.state_from_bytes(state)
+    @classmethod
+    def _fmu_state_from_bytes(cls, data: bytes):
+        try:
+            return FmuCore.state_from_bytes(data)
+        except GrapefmuError as e:
+            cls._refuse(f"deserializeFMUState refused: {e}")
+            return Refusal(str(e))
+

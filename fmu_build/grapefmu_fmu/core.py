@@ -25,17 +25,22 @@ from .variables import OUTPUT_SETS, Var, default_outputs, variables
 
 
 OUTPUTS_FILE = "outputs.txt"  # in the resources next to the scene: "full" or "summary"
+INPUTS = ("base_ax", "base_az")
+DISCARD, ERROR = 2, 3  # FMI 2 and 3 status codes
+#: solver steps one communication step may take: beyond this the step is refused (Discard) in bounded time
+STEP_BUDGET = 100_000
 
 
 class FmuCore:
     def __init__(self, scene_path: str | Path):
         scene_path = Path(scene_path)
         self.base_dir = scene_path.parent
-        self.doc = tomllib.loads(scene_path.read_text())
-        self.scene = parse_scene(scene_path.read_text(), base_dir=self.base_dir, name=scene_path.stem)
+        text = scene_path.read_text(encoding="utf-8")  # whatever the host's locale
+        self.doc = tomllib.loads(text)
+        self.scene = parse_scene(text, base_dir=self.base_dir, name=scene_path.stem)
         self.model = self.scene.model
         chosen = self.base_dir / OUTPUTS_FILE
-        self.outputs = chosen.read_text().strip() if chosen.exists() else default_outputs(self.model)
+        self.outputs = chosen.read_text(encoding="utf-8").strip() if chosen.exists() else default_outputs(self.model)
         if self.outputs not in OUTPUT_SETS:
             raise GrapefmuError(f"{OUTPUTS_FILE}: expected one of {OUTPUT_SETS}, got {self.outputs!r}")
         self.full = self.outputs == "full"
@@ -49,6 +54,7 @@ class FmuCore:
         self.values: dict[str, float | int | bool] = self._start_values()
         self.solver: Solver | None = None
         self.error: str | None = None
+        self.start_time = 0.0
 
     # --- values -----------------------------------------------------------------------------------
     def _start_values(self) -> dict:
@@ -60,7 +66,7 @@ class FmuCore:
             if var.channel is not None:
                 val[var.name] = {"real": 0.0, "integer": 0, "boolean": False}[var.type]
         for k, d in enumerate(m.dof_names if self.full else ()):
-            val.update({f"angle_{d}": sc.angles[k], f"angular_velocity_{d}": sc.angular_velocities[k]})
+            val.update({f"initial_angle_{d}": sc.angles[k], f"initial_angular_velocity_{d}": sc.angular_velocities[k]})
         for b in m.berries if self.full else ():
             if not b.spherical:
                 val.update({f"{key}_{b.name}": getattr(b, key) for key in (
@@ -70,7 +76,7 @@ class FmuCore:
         val.update({"coupling_stiffness": cp.stiffness if cp else 0.0, "coupling_damping": cp.damping if cp else 0.0,
                     "contact_law": int(law.law) if law else int(Law.KELVIN_VOIGT),
                     "contact_stiffness": law.stiffness if law else 2000.0,
-                    "contact_damping": law.damping if law else 0.0,
+                    "contact_damping": law.damping if law and not law.restitution else 0.0,
                     "restitution": (law.restitution or 0.0) if law else 0.0,
                     "gravity": m.gravity, "rtol": sc.solver.rtol})
         return val
@@ -83,24 +89,31 @@ class FmuCore:
         for b in doc["berries"] if self.full else ():
             n = b["name"]
             if b.get("kind", "planar") == "spherical":
-                b["angle"] = [v[f"angle_{n}_swing"], v[f"angle_{n}_tilt"]]
-                b["angular_velocity"] = [v[f"angular_velocity_{n}_swing"], v[f"angular_velocity_{n}_tilt"]]
+                b["angle"] = [v[f"initial_angle_{n}_swing"], v[f"initial_angle_{n}_tilt"]]
+                b["angular_velocity"] = [v[f"initial_angular_velocity_{n}_swing"],
+                                         v[f"initial_angular_velocity_{n}_tilt"]]
                 continue
             for key in ("mass", "radius", "twig_length", "hinge_x", "hinge_stiffness", "hinge_damping"):
                 b[key] = v[f"{key}_{n}"]
-            b["angle"] = v[f"angle_{n}"]
-            b["angular_velocity"] = v[f"angular_velocity_{n}"]
+            b["angle"] = v[f"initial_angle_{n}"]
+            b["angular_velocity"] = v[f"initial_angular_velocity_{n}"]
         if "contact" in doc:
             code = v["contact_law"]
             if not (isinstance(code, int) and 0 <= code < len(LAWS)):
                 raise GrapefmuError(f"contact_law: expected 0, 1 or 2, got {code!r}")
             c = {k: doc["contact"][k] for k in ("pairs", "allow_tension") if k in doc["contact"]}
             c.update(law=LAWS[code], stiffness=v["contact_stiffness"])
-            if LAWS[code] != "hertz":
-                if v["restitution"] > 0:
-                    c["restitution"] = v["restitution"]
-                else:
-                    c["damping"] = v["contact_damping"]
+            e, damping = v["restitution"], v["contact_damping"]
+            if e > 0 and damping > 0:
+                raise GrapefmuError(f"restitution = {e!r} and contact_damping = {damping!r}: set one of them and "
+                                    "leave the other 0 (restitution > 0 calibrates the damping)")
+            if LAWS[code] == "hertz" and (e > 0 or damping > 0):
+                raise GrapefmuError(f"contact_law = 1 (hertz) has no damping: restitution and contact_damping "
+                                    f"must be 0, got {e!r} and {damping!r}")
+            if e > 0:
+                c["restitution"] = e
+            elif LAWS[code] != "hertz":
+                c["damping"] = damping
             doc["contact"] = c
         if v["coupling_stiffness"] or v["coupling_damping"]:
             pairs = doc.get("coupling", {}).get("pairs")
@@ -118,7 +131,8 @@ class FmuCore:
         """Build the solver from the parameters; returns an error message instead of raising."""
         try:
             self.scene = self.scene_from_parameters()
-            self.solver = Solver(self.scene, t_start=start_time)
+            self.start_time = start_time
+            self.solver = Solver(self.scene, t_start=start_time, max_steps=STEP_BUDGET)
             self.error = None
             self._update_outputs()
         except GrapefmuError as e:
@@ -127,22 +141,39 @@ class FmuCore:
         return self.error
 
     # --- stepping ---------------------------------------------------------------------------------
-    def step(self, t: float, dt: float) -> str | None:
-        """Integrate [t, t + dt] with the inputs held. Returns an error message (state unchanged) or None."""
+    @property
+    def time(self) -> float:
+        return self.solver.t if self.solver is not None else self.start_time
+
+    def value_problem(self, name: str, value) -> str | None:
+        """Why `value` cannot be set on variable `name`, or None. Inputs are checked here, when they are set;
+        parameters together with the scene when initialization ends."""
+        kind = type(self.values[name])
+        if kind is bool:
+            ok = isinstance(value, (bool, int)) and value in (0, 1)
+        elif kind is int:
+            ok = isinstance(value, int) and not isinstance(value, bool)
+        else:
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        if not ok:
+            return f"{name} = {value!r}: expected a finite {kind.__name__}; value refused"
+        if name in INPUTS and abs(value) > MAX_ACCEL:
+            return f"input {name} = {value!r}: expected an acceleration within ±{MAX_ACCEL:g} m/s²; value refused"
+        return None
+
+    def step(self, t: float, dt: float) -> tuple[int, str] | None:
+        """Integrate [t, t + dt] with the inputs held. Returns None, or (FMI status, message) with the state
+        unchanged: Error for a request the FMU cannot accept, Discard when the solver could not finish."""
         if self.solver is None:
-            return self.error or "do_step before initialization"
+            return ERROR, self.error or "doStep before exitInitializationMode"
         if not (math.isfinite(dt) and dt > 0):
-            return f"communication step: expected a finite step > 0 s, got {dt!r}"
+            return ERROR, f"communication step: expected a finite step > 0 s, got {dt!r}"
         if abs(t - self.solver.t) > 1e-9 * max(1.0, abs(t)):
-            return f"currentCommunicationPoint {t!r} s does not continue from the FMU's time {self.solver.t!r} s"
-        for name in ("base_ax", "base_az"):
-            a = self.values[name]
-            if not (isinstance(a, (int, float)) and math.isfinite(a) and abs(a) <= MAX_ACCEL):
-                return f"input {name} = {a!r}: expected a finite acceleration within ±{MAX_ACCEL:g} m/s²; step refused"
+            return ERROR, f"currentCommunicationPoint {t!r} s does not continue from the FMU's time {self.solver.t!r} s"
         try:
-            self.solver.advance(dt, (float(self.values["base_ax"]), float(self.values["base_az"])))
+            self.solver.advance(dt, tuple(float(self.values[name]) for name in INPUTS))
         except GrapefmuError as e:
-            return f"step [{t:.9g}, {t + dt:.9g}] s refused: {e}"
+            return DISCARD, f"step [{t:.9g}, {t + dt:.9g}] s not taken, the FMU keeps its state: {e}"
         self.solver.take_impacts()  # the totals count them; keep the list of finished impacts from growing
         self._update_outputs()
         return None
@@ -162,13 +193,22 @@ class FmuCore:
                 "error": self.error}
 
     def set_state(self, state: dict) -> None:
-        self.values.clear()  # in place: the FMI variables' getters and setters hold this dict
-        self.values.update(state["values"])
-        self.error = state["error"]
+        """Restore a state from get_state (or state_from_bytes); anything else is a StateError and changes nothing."""
+        values = state["values"]
+        if set(values) != set(self.values):
+            raise StateError(f"FMU state: variables {sorted(set(values) ^ set(self.values))[:5]} do not match this FMU's")
+        for name, x in values.items():
+            problem = self.value_problem(name, x) if type(x) is type(self.values[name]) else f"{name}: wrong type"
+            if problem:
+                raise StateError(f"FMU state: {problem}")
+        solver = self.solver
         if state["solver"] is not None:
-            if self.solver is None:
-                self.solver = Solver(self.scene_from_parameters())
-            self.solver.set_state(state["solver"])
+            solver = solver or Solver(self.scene_from_parameters(), max_steps=STEP_BUDGET)
+            solver.set_state(state["solver"])  # refuses before anything changes
+        self.solver = solver if state["solver"] is not None else None
+        self.values.clear()  # in place: the FMI variables' getters and setters hold this dict
+        self.values.update(values)
+        self.error = state["error"]
 
     @staticmethod
     def state_to_bytes(state: dict) -> bytes:

@@ -1,17 +1,17 @@
-"""FMI 2.0 co-simulation slave (pythonfmu). pythonfmu turns a Python exception into fmi2Fatal and a
-False from do_step into fmi2Discard, so nothing here raises: errors are logged with fmi2Error
-status and the step is refused (fmi2Discard), the state left as it was."""
+"""FMI 2.0 co-simulation slave (pythonfmu); refusals are reported as common.py describes."""
 from __future__ import annotations
 
-from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real
-from pythonfmu.enums import Fmi2Status
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
+
+from pythonfmu.default_experiment import DefaultExperiment
 
 from .common import GrapeSlaveMixin, kinds
 
 
 class GrapeFmi2Slave(GrapeSlaveMixin, Fmi2Slave):
     TYPES = {"real": Real, "integer": Integer, "boolean": Boolean}
-    INITIAL = Fmi2Initial
+    ACCESS = {"real": Real, "integer": Integer, "boolean": Boolean, "string": String}
+    EXPERIMENT = DefaultExperiment
     KINDS = kinds(Fmi2Causality, Fmi2Variability, Fmi2Initial)
 
     def __init__(self, **kwargs):
@@ -21,16 +21,8 @@ class GrapeFmi2Slave(GrapeSlaveMixin, Fmi2Slave):
             self._register(var)
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        self.start_time = float(start_time or 0.0)
-
-    def exit_initialization_mode(self):
-        err = self.core.initialize(self.start_time)
-        if err:
-            self.log(err, Fmi2Status.error)
+        self.start_time = float(start_time or 0.0)  # the stop time is enforced by the FMU's binary
 
     def do_step(self, current_time, step_size):
-        err = self.core.step(current_time, step_size)
-        if err:
-            self.log(err, Fmi2Status.error)
-            return False
-        return True
+        self._step(current_time, step_size)
+        return True  # a refusal already set the call's status (Error or Discard)

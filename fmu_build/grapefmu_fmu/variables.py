@@ -46,6 +46,10 @@ def variables(model: Model, outputs: str = "full") -> list[Var]:
     k_unit = "N/m" if law == "kelvin-voigt" else "N/m1.5"
     c_unit = "N.s/m" if law == "kelvin-voigt" else "1"
     v = channel_vars(model, outputs)
+    for d in (model.dof_names if outputs == "full" else ()):
+        v += [Var(f"initial_angle_{d}", "real", "parameter", "rad", f"Twig angle {d} at the start time"),
+              Var(f"initial_angular_velocity_{d}", "real", "parameter", "rad/s",
+                  f"Twig angular velocity {d} at the start time")]
     for b in (model.berries if outputs == "full" else ()):
         if b.spherical:
             continue  # a spherical twig's hinge is placed by the cluster generator, not tuned alone
@@ -62,9 +66,9 @@ def variables(model: Model, outputs: str = "full") -> list[Var]:
           Var("contact_stiffness", "real", "parameter", k_unit,
               "Contact stiffness: k in N/m (kelvin-voigt) or K in N/m^1.5 (hertz, hunt-crossley)"),
           Var("contact_damping", "real", "parameter", c_unit,
-              "Contact damping: c in N.s/m (kelvin-voigt) or chi (hunt-crossley); used when restitution is 0"),
+              "Contact damping: c in N.s/m (kelvin-voigt) or chi (hunt-crossley); 0 when restitution sets it"),
           Var("restitution", "real", "parameter", "1",
-              "Target coefficient of restitution; > 0 calibrates the contact damping from it"),
+              "Target coefficient of restitution; > 0 calibrates the contact damping (contact_damping must be 0)"),
           Var("gravity", "real", "parameter", "m/s2", "Gravitational acceleration"),
           Var("rtol", "real", "parameter", "1", "Relative tolerance of the event-driven solver")]
     return v

@@ -21,6 +21,7 @@ from std_srvs.srv import SetBool, Trigger
 
 from grapefmu import GrapefmuError, Solver, load_scene
 from grapefmu.scenefile import default_scene_path
+from grapefmu.solver.solver import MAX_ACCEL
 from grapefmu.recording import messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
@@ -51,8 +52,9 @@ class SimulatorNode(Node):
             description="Real-time mode: simulation and joint_states rate, Hz", floating_point_range=_range(1, 10000), **ro))
         self.declare_parameter("real_time_factor", 1.0, ParameterDescriptor(
             description="Simulated seconds per wall second in real-time mode", floating_point_range=_range(0.01, 100)))
-        self.declare_parameter("max_accel", 100.0, ParameterDescriptor(
-            description="Inputs above this acceleration (m/s²) are rejected", floating_point_range=_range(0, 1000)))
+        self.declare_parameter("max_accel", MAX_ACCEL, ParameterDescriptor(
+            description="Inputs above this acceleration (m/s²) are rejected (at most the solver's own bound)",
+            floating_point_range=_range(0, MAX_ACCEL)))
         self.declare_parameter("marker_rate_hz", 30.0, ParameterDescriptor(
             description="MarkerArray rate, Hz (0: none)", floating_point_range=_range(0, 1000)))
         self.declare_parameter("pose_filter_hz", 20.0, ParameterDescriptor(

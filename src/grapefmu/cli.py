@@ -2,17 +2,26 @@
 from __future__ import annotations
 
 import argparse
+import math
+import os
+import signal
 import sys
+import threading
 import time
+import tomllib
 from pathlib import Path
 
 from . import __version__
-from .errors import GrapefmuError
+from .errors import GrapefmuError, SolverError
+from .results.writers import check_target
 from .scenefile import default_scene_path
 
 
 class Progress:
     """A one-line progress bar on stderr, shown only once a run has taken more than a second."""
+
+    #: a bar is on screen without its newline (an error or interruption message starts a new line)
+    open_line = False
 
     def __init__(self, label: str):
         self.label = label
@@ -30,6 +39,7 @@ class Progress:
         sys.stderr.write(f"\r{self.label} [{bar:<30}] {100 * frac:5.1f}%  t = {t:.3f} s  wall {wall:.1f} s")
         if frac >= 1.0:
             sys.stderr.write("\n")
+        Progress.open_line = frac < 1.0
         sys.stderr.flush()
         self.shown = True
 
@@ -45,7 +55,7 @@ def _summary_table(run) -> str:
         ("peak pedicel tension", f"{s['peak_pedicel_tension']:.4g} N"),
         ("largest impact energy", f"{1e3 * s['max_impact_energy']:.4g} mJ"),
         ("energy dissipated", f"{1e3 * s['dissipated_energy']:.4g} mJ"),
-        ("energy ledger error", f"{run.ledger_error():.2e} (relative)"),
+        ("energy ledger error", run.ledger_report()),
         ("detachment risk", ("YES: " + ", ".join(s["detached_berries"][:10])
                              + (", ..." if len(s["detached_berries"]) > 10 else ""))
          if s["detachment_risk"] else "no"),
@@ -69,14 +79,25 @@ def _summary_table(run) -> str:
 
 def cmd_simulate(a: argparse.Namespace) -> int:
     from .scenefile import load_scene
-    from .write import write_run
+    from .write import check_output, write_run
+    from .results.plot import check_plot
     from .solver.api import simulate
+    from .solver.budget import check_samples
 
+    if a.out is not None:  # refuse an output that cannot be written before the run, not after it
+        check_output(a.out, "--out")
+    if a.plot is not None:
+        check_plot(a.plot, "--plot")
     scene = load_scene(a.scene or default_scene_path())
+    if a.t_end is not None:
+        check_samples(scene.model, a.t_end, scene.solver.output_interval, "--t-end")
     run = simulate(scene, a.t_end, method=a.method, rtol=a.rtol, atol=a.atol, progress=Progress("simulate"))
     print(f"scene {scene.name}: {scene.model.n_berries} berries, {len(scene.model.pairs)} contact pairs, "
           f"excitation {scene.excitation.kind}")
     print(_summary_table(run))
+    warnings = run.summary()["warnings"]
+    for w in warnings:
+        print(f"warning: {w}")
     if a.out:
         write_run(run, a.out)
         print(f"wrote {a.out}")
@@ -84,6 +105,9 @@ def cmd_simulate(a: argparse.Namespace) -> int:
         from .results.plot import plot_run
         plot_run(run, a.plot)
         print(f"wrote {a.plot}")
+    if a.strict and warnings:
+        print(f"grapefmu: --strict: {len(warnings)} warning(s), the results cannot be trusted", file=sys.stderr)
+        return 3
     return 0
 
 
@@ -93,7 +117,7 @@ def cmd_cluster(a: argparse.Namespace) -> int:
     from .scenefile import dumps
     from .results.writers import atomic_path
 
-    out = Path(a.output)
+    out = check_target(a.output, (".toml",), "--output")
     if a.row:
         doc = row_scene(RowSpec(berries=a.berries, pitch=a.pitch if a.pitch is not None else 0.027, name=out.stem))
     else:
@@ -116,7 +140,9 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     from .sweep import load_spec, run_sweep
 
     spec = load_spec(a.spec)
-    out = Path(a.output) if a.output else Path(a.spec).with_suffix(".parquet")
+    out = check_target(a.output if a.output is not None else Path(a.spec).with_suffix(".parquet"), (".parquet",),
+                       "--output")
+    a.output = str(out)  # named if the sweep is interrupted
     if a.workers is not None and not 1 <= a.workers <= 1024:
         raise GrapefmuError(f"--workers: expected an integer in [1, 1024], got {a.workers}")
     run_sweep(spec, out, workers=a.workers, scheduler=a.scheduler)
@@ -126,7 +152,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
 
 def cmd_paper(a: argparse.Namespace) -> int:
     from .paper.reproduce import reproduce
-    return reproduce(Path(a.out))
+    return reproduce(check_target(a.out, None, "--out"))
 
 
 def face(name: str, needs: str):
@@ -142,22 +168,33 @@ def face(name: str, needs: str):
 
 
 def cmd_build_fmu(a: argparse.Namespace) -> int:
+    check_target(a.output, (".fmu",), "--output")
     build_fmu = face("build_fmu", "the FMU extra (pip install 'grapefmu[fmu]')")
     out = build_fmu(a.scene or default_scene_path(), a.output, a.fmi, a.outputs)
     print(f"wrote {out} (FMI {a.fmi}.0 co-simulation)")
+    if a.cross_check:
+        cross_check = face("cross_check", "the FMU extra (pip install 'grapefmu[fmu]')")
+        print(f"wrote the FMI cross-check package {cross_check(a.scene or default_scene_path(), a.cross_check, a.fmi)}")
     return 0
 
 
 def cmd_replay(a: argparse.Namespace) -> int:
     if a.publish:
+        if not Path(a.recording).is_file():
+            raise GrapefmuError(f"{a.recording}: no such recording (expected an MCAP file written by grapefmu)")
         return face("publish", "ROS 2 (pip install 'grapefmu[ros]')")(a.recording, a.rate)
     from .recording.replay import check
-    r = check(a.recording)
+    r = check(a.recording)  # a corrupted file raises CorruptRecording: one line naming the record, exit 2
     if r.truncated:
         print(f"warning: {r.truncated}", file=sys.stderr)
     print(f"re-simulated from {'the scene' if r.source == 'scene' else 'the recorded applied inputs'}; "
           f"{r.compared} joint states compared")
     print(f"  largest deviation: angle {r.max_angle_deviation:.3g} rad, angular velocity {r.max_rate_deviation:.3g} rad/s")
+    if not r.ok:
+        print(f"grapefmu: check failed: {a.recording}: the recorded joint states deviate by up to "
+              f"{r.max_deviation:.3g} (at t = {r.worst_time:.6f} s), more than the tolerance {r.tolerance:g} rad, rad/s",
+              file=sys.stderr)
+        return 1
     return 0
 
 
@@ -168,6 +205,8 @@ def cmd_outputs(a: argparse.Namespace) -> int:
 
 
 def cmd_bench(a: argparse.Namespace) -> int:
+    check_target(a.out, (".md",), "--out")
+    check_target(a.plots, None, "--plots")
     if a.scale:
         from .bench.scale import main as scale
         return scale(Path(a.out), Path(a.plots))
@@ -176,7 +215,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="grapefmu", description="Berries that swing and collide when a gripper moves a grape cluster.")
+    ap = Parser(prog="grapefmu", description="Berries that swing and collide when a gripper moves a grape cluster.")
     ap.add_argument("--version", action="version", version=f"grapefmu {__version__}")
     sub = ap.add_subparsers(dest="command", required=True)
     s = sub.add_parser("simulate", help="run a scene and report impacts, peaks and indicators")
@@ -187,6 +226,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--method", choices=("event", "paper", "reference"), help="integration method")
     s.add_argument("--out", help="write samples to .csv, .parquet or .mcap")
     s.add_argument("--plot", help="write a figure (.png, .pdf or .svg)")
+    s.add_argument("--strict", action="store_true",
+                   help="exit with code 3 when the run has warnings (results that cannot be trusted)")
     s.set_defaults(func=cmd_simulate)
     b = sub.add_parser("build-fmu", help="package a scene as an FMI co-simulation FMU")
     b.add_argument("scene", nargs="?", help="scene TOML (default: the packaged default scene)")
@@ -194,6 +235,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
     b.add_argument("--outputs", choices=("full", "summary"),
                    help="per angle, berry and pair, or cluster totals only (default: full up to 16 berries and pairs)")
+    b.add_argument("--cross-check", metavar="DIR",
+                   help="also write the FMI cross-check package (FMU, _in.csv, _ref.csv, _ref.opt, ReadMe) under DIR")
     b.set_defaults(func=cmd_build_fmu)
     r = sub.add_parser("replay", help="check a recording by re-simulating it, or republish it")
     r.add_argument("recording", help="an MCAP file written by grapefmu simulate or the ROS node")
@@ -236,21 +279,128 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _check_overrides(a: argparse.Namespace) -> None:
-    import math
     for name, lo, hi in (("t_end", 0.0, 1e5), ("rtol", 1e-14, 0.1), ("atol", 1e-16, 1.0)):
         v = getattr(a, name, None)
         if v is not None and not (math.isfinite(v) and lo < v <= hi):
             raise GrapefmuError(f"--{name.replace('_', '-')}: expected a number in ({lo:g}, {hi:g}], got {v!r}")
+    rate = getattr(a, "rate", None)
+    if rate is not None and not (math.isfinite(rate) and rate >= 0.0):
+        raise GrapefmuError(f"--rate: expected a finite speed factor > 0 (or 0 for as fast as possible), got {rate!r}")
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, with a usage error as one line (`grapefmu simulate: argument --t-end: ...`) and exit code 2."""
+
+    def error(self, message: str):
+        self.exit(USAGE, f"{self.prog}: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+    def parse_args(self, args=None, namespace=None):
+        a, extra = self.parse_known_args(args, namespace)
+        if extra:  # named with the command they were given to
+            prog = f"{self.prog} {a.command}" if getattr(a, "command", None) else self.prog
+            self.exit(USAGE, f"{prog}: unrecognized arguments: {' '.join(extra)} (see {prog} --help)\n")
+        return a
+
+
+#: exit codes: a usage or input error the user can fix, a run that failed, an interruption (128 + signal)
+USAGE, FAILURE = 2, 1
+
+
+class Interrupted(KeyboardInterrupt):
+    """SIGINT or SIGTERM, raised where the program is, so every `with atomic_path(...)` removes its temporary file."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _on_signal(signum, frame):
+    # a second signal while cleaning up ends the process at once (the next writer removes what it left)
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    raise Interrupted(signum)
+
+
+def _explain(e: BaseException) -> tuple[str, int]:
+    """An error a user can cause as (one line naming the input and what is allowed, exit code)."""
+    if isinstance(e, SolverError):
+        return str(e), FAILURE
+    if isinstance(e, GrapefmuError):
+        return str(e), USAGE
+    if isinstance(e, UnicodeDecodeError):
+        return f"input is not UTF-8 text ({e.reason} at byte {e.start})", USAGE
+    if isinstance(e, OSError):
+        where = f"{e.filename}: " if e.filename is not None else ""
+        user = isinstance(e, (FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError,
+                              PermissionError))
+        return f"{where}{e.strerror or e}", USAGE if user else FAILURE
+    if isinstance(e, tomllib.TOMLDecodeError):
+        return f"not valid TOML: {e}", USAGE
+    if isinstance(e, RecursionError):
+        return "input nested too deeply to read (a few hundred levels at most)", USAGE
+    if isinstance(e, OverflowError):
+        return f"a number is out of range: {e}", USAGE
+    if isinstance(e, MemoryError):
+        return "out of memory: shorten the run, raise the output interval or use fewer berries", FAILURE
+    raise e
+
+
+#: what each command writes (argument names), named when a run is interrupted
+TARGETS = {"simulate": ("out", "plot"), "cluster": ("output",), "sweep": ("output",), "build-fmu": ("output",),
+           "paper": ("out",), "bench": ("out", "plots")}
+
+
+def _stamp(path: str) -> tuple | None:
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        return None
+    return st.st_ino, st.st_mtime_ns, st.st_size
+
+
+def _interrupted(a: argparse.Namespace, before: dict[str, tuple | None]) -> str:
+    """What an interruption leaves: every file target not replaced since the start is untouched."""
+    paths = [str(getattr(a, k)) for k in TARGETS.get(a.command, ()) if getattr(a, k, None)]
+    files = [p for p in paths if not os.path.isdir(p) and _stamp(p) == before.get(p)]
+    dirs = [p for p in paths if os.path.isdir(p)]
+    said = "interrupted"
+    if files:
+        said += f"; nothing written to {', '.join(files)}"
+    if dirs:
+        said += f"; {', '.join(dirs)} holds only what was finished"
+    return said
 
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
+    cmd = f"grapefmu {a.command}"
+    before = {str(getattr(a, k)): _stamp(str(getattr(a, k))) for k in TARGETS.get(a.command, ()) if getattr(a, k, None)}
+    handlers = {}
+    if threading.current_thread() is threading.main_thread():
+        handlers = {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        _check_overrides(a)
-        return a.func(a)
-    except GrapefmuError as e:
-        print(f"grapefmu: error: {e}", file=sys.stderr)
-        return 2
+        try:
+            _check_overrides(a)
+            return a.func(a)
+        except (GrapefmuError, OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError, OverflowError,
+                MemoryError) as e:
+            text, code = _explain(e)
+            print(f"{_newline()}{cmd}: {' '.join(text.split())}", file=sys.stderr)
+            return code
+        except KeyboardInterrupt as e:
+            signum = getattr(e, "signum", signal.SIGINT)
+            print(f"{_newline()}{cmd}: {_interrupted(a, before)}", file=sys.stderr)
+            return 128 + signum
+    finally:
+        for sig, h in handlers.items():
+            if h is not None:
+                signal.signal(sig, h)
+
+
+def _newline() -> str:
+    """A newline if a progress bar is on screen, so the message that follows starts its own line."""
+    said, Progress.open_line = Progress.open_line, False
+    return "\n" if said else ""
 
 
 if __name__ == "__main__":

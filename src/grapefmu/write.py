@@ -1,22 +1,29 @@
 """`write_run(run, path)`: a run to CSV, Parquet or MCAP, chosen by the file's type."""
 from __future__ import annotations
 
+import importlib
 from pathlib import Path
 
 from .errors import GrapefmuError
 from .results.run import Run
+from .results.writers import check_target, one_of
+
+#: every file type write_run writes, with the module and function that write it (imported on use)
+WRITERS = {
+    ".csv": ("grapefmu.results.writers", "write_csv"),
+    ".parquet": ("grapefmu.results.writers", "write_parquet"),
+    ".mcap": ("grapefmu.recording.mcap_writer", "write_mcap"),
+}
+
+
+def check_output(path: str | Path, option: str = "output") -> Path:
+    """Refuse, before the run, a path write_run could not write (unknown type, a directory, not writable)."""
+    return check_target(path, WRITERS, option)
 
 
 def write_run(run: Run, path: str | Path) -> None:
     suffix = Path(path).suffix.lower()
-    if suffix == ".csv":
-        from .results.writers import write_csv
-        write_csv(run, path)
-    elif suffix == ".parquet":
-        from .results.writers import write_parquet
-        write_parquet(run, path)
-    elif suffix == ".mcap":
-        from .recording.mcap_writer import write_mcap
-        write_mcap(run, path)
-    else:
-        raise GrapefmuError(f"{path}: unknown file type {suffix!r}; use .csv, .parquet or .mcap")
+    if suffix not in WRITERS:
+        raise GrapefmuError(f"{path}: unknown file type {suffix!r}; use {one_of(WRITERS)}")
+    module, name = WRITERS[suffix]
+    getattr(importlib.import_module(module), name)(run, path)

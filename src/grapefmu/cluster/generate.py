@@ -64,6 +64,8 @@ class ClusterSpec:
 def _check(spec: ClusterSpec) -> None:
     if not 1 <= spec.berries <= 1000:
         raise SceneError("cluster.berries", f"expected an integer in [1, 1000], got {spec.berries!r}")
+    if not 0 <= spec.seed < 2**63:
+        raise SceneError("cluster.seed", f"expected an integer in [0, 2**63), got {spec.seed!r}")
     for key in ("diameter", "twig_length", "hinge_stiffness", "hinge_damping"):
         s = getattr(spec, key)
         if not (s.mean > 0 and s.sd >= 0 and math.isfinite(s.mean) and math.isfinite(s.sd)):
@@ -167,6 +169,8 @@ def row_scene(spec: RowSpec) -> dict[str, Any]:
     n = spec.berries
     if not 1 <= n <= 1000:
         raise SceneError("row.berries", f"expected an integer in [1, 1000], got {n!r}")
+    if not (math.isfinite(spec.pitch) and 0 < spec.pitch <= 1.0):
+        raise SceneError("row.pitch", f"expected a hinge spacing in (0, 1] m, got {spec.pitch!r}")
     angles = list(spec.angles) or [-math.radians(30.0)] + [0.0] * (n - 1)
     if len(angles) != n:
         raise SceneError("row.angles", f"expected {n} angles (one per berry), got {len(angles)}")

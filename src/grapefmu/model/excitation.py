@@ -117,10 +117,12 @@ def read_csv(path: Path, key: str, hold: bool = False) -> Excitation:
     """A CSV of time, ax, az (header row allowed); linear in between (or held from each row to the
     next with hold = true, as a sampled controller output is), zero outside."""
     try:
-        with open(path, newline="") as fh:
+        with open(path, newline="", encoding="utf-8") as fh:
             raw = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
     except OSError as exc:
-        raise SceneError(key, f"cannot read CSV file {path}: {exc.strerror}") from None
+        raise SceneError(key, f"cannot read CSV file {path}: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise SceneError(key, f"{path}: not a UTF-8 CSV of time, ax, az ({exc})") from None
     if raw and not _is_number(raw[0][0]):
         raw = raw[1:]
     if len(raw) < 2:

@@ -23,7 +23,8 @@ def run_metadata(run: Run) -> dict[str, str]:
                                   "t_end": float(run.t[-1]), "output_interval": s.output_interval})}
 
 
-def write_mcap(run: Run, path: str | Path) -> None:
+def write_mcap(run: Run, path: str | Path, *, chunk_size: int = 1 << 20) -> None:
+    """`chunk_size`: uncompressed bytes per chunk (a torn file reads back up to its last complete chunk)."""
     model = run.scene.model
     snap = run.snapshot()
     summary = messages.summary_table(snap)
@@ -34,7 +35,7 @@ def write_mcap(run: Run, path: str | Path) -> None:
         timed += [(ns, 1, topic, m) for topic, m in messages.state_messages(model, snap, k, ns, summary)]
     timed += [(ns, 2, topic, m) for ns, topic, m in messages.impact_messages(run.impacts)]
     timed.sort(key=lambda x: (x[0], x[1]))
-    with atomic_path(path) as tmp, McapWriter(tmp) as wr:
+    with atomic_path(path) as tmp, McapWriter(tmp, chunk_size=chunk_size) as wr:
         wr.add_metadata("grapefmu", run_metadata(run))
         for ns, _, topic, m in timed:
             wr.write(topic, m, ns)

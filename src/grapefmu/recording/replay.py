@@ -2,17 +2,31 @@
 
 A recording from `grapefmu simulate` is re-simulated from the scene and solver settings in its metadata;
 one from the ROS node is re-simulated from `rachis/accel_applied`, the exact intervals and held
-accelerations the node integrated. Either way the recorded joint states are compared with the new run.
-A file that ends abruptly (a killed recorder) is read up to its last complete chunk and reported."""
+accelerations the node integrated. Either way the recorded joint states are compared with the new run,
+and a deviation above TOLERANCE fails the check.
+
+Reading tells two kinds of damage apart (`read_recording`):
+- truncated: the writer was killed, so the file ends inside a record and has no summary, footer or end
+  magic. Everything up to the last complete chunk is read (and CRC-checked) and the check goes on with it.
+- corrupted: a chunk whose CRC (mcap's `validate_crcs`) or decompression fails, a data section or summary
+  section whose CRC fails, a record the mcap reader cannot parse anywhere but at a torn end, a message that
+  does not decode, counts that disagree with the Statistics record. Reading stops with CorruptRecording,
+  one line naming the record (byte offset, topic, log time)."""
 from __future__ import annotations
 
+import io
 import json
+import math
+import mmap
+import os
+import struct
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import RecordingError
+from ..errors import GrapefmuError, RecordingError
 from ..scenefile import parse_scene
 from .stamps import seconds, stamp_seconds, to_ns
 
@@ -49,31 +63,162 @@ def iter_messages(fh, on_metadata=None):
             yield schemas[ch.schema_id], ch, r
 
 
-def read_recording(path: str | Path, topics: set[str] | None = None) -> Recording:
-    """Every message (of the given topics), decoded through the typestore that wrote it."""
-    from .typestore import deserialize
+class CorruptRecording(RecordingError):
+    """A recording whose bytes are damaged (not merely cut short): a CRC mismatch, an unparsable record, a
+    message that does not decode. The message names the record."""
 
+
+#: The MCAP magic that opens and closes a complete file.
+MAGIC = b"\x89MCAP0\r\n"
+
+
+def _t(ns: int) -> str:
+    return f"{seconds(ns):.6f} s"
+
+
+def read_recording(path: str | Path, topics: set[str] | None = None) -> Recording:
+    """Every message (of the given topics), decoded through the typestore that wrote it. Every message of
+    every topic is decoded, so an undecodable one is found wherever it is. A truncated file is read up to
+    its last complete chunk (`Recording.truncated` says so); a corrupted one raises CorruptRecording."""
     path = Path(path)
     if not path.exists():
         raise RecordingError(f"{path}: no such recording")
+    if path.is_dir():
+        raise RecordingError(f"{path}: is a directory, not an MCAP recording")
     rec = Recording(path, {})
-
-    def keep_metadata(r):
-        if r.name == "grapefmu":
-            rec.metadata.update(r.metadata)
-    with open(path, "rb") as fh:
-        try:
-            for schema, ch, r in iter_messages(fh, keep_metadata):
-                if topics and ch.topic not in topics:
-                    continue
-                rec.topics.setdefault(ch.topic, []).append((r.log_time, deserialize(r.data, schema.name)))
-                rec.count += 1
-        except Exception as e:  # noqa: BLE001 - mcap raises several types at a torn end
-            rec.truncated = (f"{path} ends abruptly ({type(e).__name__}: the recorder did not close it, probably "
-                             f"killed); {rec.count} messages read, up to t = {rec.last_time:.6f} s")
+    try:
+        with open(path, "rb") as fh:
+            size = os.fstat(fh.fileno()).st_size
+            # mapped, so that a length field damaged into gigabytes reads what the file has instead of
+            # allocating what the field claims (mmap's read stops at the end)
+            mapped = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) if size else io.BytesIO()
+            with mapped as m:
+                _scan(path, m, size, rec, topics)
+    except OSError as e:
+        raise RecordingError(f"{path}: cannot read: {e.strerror or e}") from None
     if "scene_toml" not in rec.metadata:
-        raise RecordingError(f"{path}: no grapefmu metadata record (scene and solver settings); not a grapefmu recording")
+        if rec.truncated:
+            raise RecordingError(f"{rec.truncated}; the grapefmu metadata record (scene and solver settings) is not "
+                                 f"in what remains, nothing to check")
+        raise RecordingError(f"{path}: no grapefmu metadata record (scene and solver settings); "
+                             f"not a grapefmu recording")
     return rec
+
+
+def _scan(path: Path, fh, size: int, rec: Recording, topics: set[str] | None) -> None:
+    """Stream the file record by record through mcap's StreamReader with CRC validation (chunks are broken
+    up here, so a failing chunk is known by its offset), classify a failure as truncation or corruption,
+    and check the summary CRC (which mcap's readers do not) and the Statistics of a complete file.
+
+    A record cut short by the end of the file makes mcap raise EndOfFile, a short struct read or a string
+    cut inside a UTF-8 sequence. One of these when every byte has been read and the file lacks its end magic
+    is a truncation; any failure elsewhere, or in a file that has its end magic, is corruption."""
+    from mcap.exceptions import EndOfFile
+    from mcap.records import Channel, Chunk, DataEnd, Footer, Message, Metadata, Schema, Statistics
+    from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
+
+    from .typestore import deserialize
+
+    if size >= 2 * len(MAGIC):
+        fh.seek(size - len(MAGIC))
+        complete = fh.read(len(MAGIC)) == MAGIC
+        fh.seek(0)
+    else:
+        complete = False
+    schemas, channels = {}, {}
+    counts = {"chunks": 0, "messages": 0, "last": 0}
+    stats = footer = None
+    at = len(MAGIC)  # byte offset of the record being read (after the last one the reader handed over)
+
+    def message(r: Message, where: str) -> None:
+        ch = channels.get(r.channel_id)
+        if ch is None or ch.schema_id not in schemas:
+            raise CorruptRecording(f"{path}: {where}: a message logged at {_t(r.log_time)} names channel "
+                                   f"{r.channel_id}, which the file never defines (corrupted)")
+        try:
+            typename = schemas[ch.schema_id].name
+            decoded = deserialize(r.data, typename)
+        except Exception as e:  # noqa: BLE001 - rosbags raises several types on bad CDR
+            raise CorruptRecording(f"{path}: {where}: the message on topic {ch.topic!r} logged at {_t(r.log_time)} "
+                                   f"does not decode as {typename} ({type(e).__name__}: {e})") from None
+        counts["messages"] += 1
+        counts["last"] = max(counts["last"], r.log_time)
+        if topics is None or ch.topic in topics:
+            rec.topics.setdefault(ch.topic, []).append((r.log_time, decoded))
+            rec.count += 1
+
+    def inner(r, where: str) -> None:
+        if isinstance(r, Schema):
+            schemas[r.id] = r
+        elif isinstance(r, Channel):
+            channels[r.id] = r
+        elif isinstance(r, Message):
+            message(r, where)
+
+    reader = StreamReader(fh, emit_chunks=True, validate_crcs=True)
+    try:
+        for r in reader.records:
+            start, at = at, fh.tell()
+            if isinstance(r, Chunk):
+                where = (f"chunk at byte {start} (messages logged {_t(r.message_start_time)} to "
+                         f"{_t(r.message_end_time)})")
+                try:
+                    records = breakup_chunk(r, validate_crc=True)
+                except CRCValidationError as e:
+                    raise CorruptRecording(f"{path}: {where}: CRC mismatch (stored {e.expected:#010x}, "
+                                           f"computed {e.actual:#010x}); the file is corrupted") from None
+                except Exception as e:  # noqa: BLE001 - zstd, struct and mcap errors on garbage
+                    raise CorruptRecording(f"{path}: {where}: cannot be unpacked ({type(e).__name__}: {e}); "
+                                           f"the file is corrupted") from None
+                counts["chunks"] += 1
+                for x in records:
+                    inner(x, where)
+            elif isinstance(r, Metadata):
+                if r.name == "grapefmu":
+                    rec.metadata.update(r.metadata)
+            elif isinstance(r, Statistics):
+                stats = r
+            elif isinstance(r, Footer):
+                footer = (r, start)
+            elif not isinstance(r, DataEnd):
+                inner(r, f"record at byte {start}")
+    except CorruptRecording:
+        raise
+    except CRCValidationError as e:  # the DataEnd record's data section CRC
+        raise CorruptRecording(f"{path}: the data section (up to the DataEnd record at byte {at}) fails its CRC "
+                               f"(stored {e.expected:#010x}, computed {e.actual:#010x}); corrupted") from None
+    except Exception as e:  # noqa: BLE001 - mcap raises many types on a torn end or garbage: classified here
+        if not complete and fh.tell() >= size and isinstance(e, (EndOfFile, struct.error, UnicodeDecodeError)):
+            rec.truncated = (f"{path} ends abruptly at byte {size}, without summary and footer (truncated: the writer "
+                             f"did not finish it, probably killed); read up to the last complete record, which ends "
+                             f"at byte {at}: {counts['messages']} messages, logged up to {_t(counts['last'])}")
+            return
+        why = ("the file has its end magic, so it is not merely cut short" if complete else
+               "it is not at the end of the file, where a killed writer would leave a torn record")
+        raise CorruptRecording(f"{path}: the record at byte {at} cannot be read ({type(e).__name__}: {e}); "
+                               f"corrupted ({why})") from None
+    if fh.tell() != size:
+        raise CorruptRecording(f"{path}: {size - fh.tell()} bytes follow the end magic at byte {fh.tell()}; corrupted")
+    f, f_at = footer
+    if f.summary_crc:
+        start = f.summary_start or f_at
+        if not 0 < start <= f_at:
+            raise CorruptRecording(f"{path}: the footer at byte {f_at} puts the summary at byte {f.summary_start}, "
+                                   f"outside the file; corrupted")
+        fh.seek(start)
+        crc = zlib.crc32(fh.read(f_at + 25 - start))  # summary section + footer up to its CRC field
+        if crc != f.summary_crc:
+            raise CorruptRecording(f"{path}: the summary section (bytes {start} to {f_at + 25}) fails its CRC "
+                                   f"(stored {f.summary_crc:#010x}, computed {crc:#010x}); corrupted")
+    if stats is not None and (stats.message_count, stats.chunk_count) != (counts["messages"], counts["chunks"]):
+        raise CorruptRecording(f"{path}: {counts['messages']} messages in {counts['chunks']} chunks read, the "
+                               f"Statistics record says {stats.message_count} in {stats.chunk_count}; corrupted")
+
+
+#: The largest deviation (rad and rad/s) a re-simulation may show from the recorded joint states. A replay
+#: on the same build is bit for bit (deviation 0); 1e-6 leaves room for another CPU's or library's last-bit
+#: rounding growing over a run, and is far below anything physical (a berry's angle is read to ~1e-3 rad).
+TOLERANCE = 1e-6
 
 
 @dataclass
@@ -83,36 +228,84 @@ class CheckResult:
     max_rate_deviation: float
     source: str
     truncated: str | None
+    worst_time: float = math.nan   # s, the recorded time of the largest deviation
+    tolerance: float = TOLERANCE
 
     @property
     def max_deviation(self) -> float:
         return max(self.max_angle_deviation, self.max_rate_deviation)
 
+    @property
+    def ok(self) -> bool:
+        """Every compared joint state within the tolerance (NaN counts as a deviation)."""
+        return self.max_deviation <= self.tolerance
 
-def check(path: str | Path) -> CheckResult:
+
+def _deviation(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest |a − b|; NaN or infinite anywhere is an infinite deviation."""
+    d = np.abs(np.asarray(a, dtype=float) - np.asarray(b, dtype=float))
+    return float(d.max(initial=0.0)) if np.isfinite(d).all() else math.inf
+
+
+def _settings(path: Path, rec: Recording):
+    """The scene and solver settings a recording was made with, or a RecordingError saying why not."""
+    try:
+        scene = parse_scene(rec.metadata["scene_toml"], name=rec.metadata.get("scene_name", "scene"))
+        cfg = json.loads(rec.metadata.get("solver", "{}"))
+        if not isinstance(cfg, dict):
+            raise ValueError("the solver settings are not a table")
+        for key in ("t_end", "rtol", "atol", "output_interval"):
+            v = cfg.get(key)
+            if v is not None and not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                                      and v > 0):
+                raise ValueError(f"solver setting {key} = {v!r} is not a positive number")
+    except GrapefmuError as e:
+        raise RecordingError(f"{path}: the recorded scene is not valid: {e}") from None
+    except ValueError as e:  # json.JSONDecodeError included
+        raise RecordingError(f"{path}: the recorded solver settings are not valid: {e}") from None
+    return scene, cfg
+
+
+def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
+    """Re-simulate a recording and compare its joint states. A truncated file is checked up to its last
+    complete chunk; a corrupted one raises CorruptRecording; `CheckResult.ok` says whether every deviation
+    is within `tolerance`."""
+    path = Path(path)
     rec = read_recording(path, {"joint_states", "rachis/accel_applied"})
-    scene = parse_scene(rec.metadata["scene_toml"], name=rec.metadata.get("scene_name", "scene"))
-    solver_cfg = json.loads(rec.metadata.get("solver", "{}"))
+    scene, solver_cfg = _settings(path, rec)
+    n_dof = scene.model.n_dof
     recorded = {}
-    for _, m in rec.topics.get("joint_states", []):
-        recorded[stamp_seconds(m.header.stamp.sec, m.header.stamp.nanosec)] = (np.array(m.position),
-                                                                               np.array(m.velocity))
+    for ns, m in rec.topics.get("joint_states", []):
+        q, w = np.array(m.position, dtype=float), np.array(m.velocity, dtype=float)
+        if q.shape != (n_dof,) or w.shape != (n_dof,):
+            raise RecordingError(f"{path}: joint_states logged at {_t(ns)} has {q.size} positions and {w.size} "
+                                 f"velocities, the recorded scene has {n_dof} angles")
+        recorded[stamp_seconds(m.header.stamp.sec, m.header.stamp.nanosec)] = (q, w)
     if not recorded:
         raise RecordingError(f"{path}: no joint_states to compare")
     source = rec.metadata.get("input_source", "scene")
     dq = dw = 0.0
+    worst, worst_t = -1.0, math.nan
     n = 0
+
+    def compare(t: float, angles, rates) -> None:
+        nonlocal dq, dw, worst, worst_t, n
+        q, w = recorded[t]
+        a, b = _deviation(angles, q), _deviation(rates, w)
+        dq, dw = max(dq, a), max(dw, b)
+        if max(a, b) > worst:
+            worst, worst_t = max(a, b), t
+        n += 1
+
     if source == "scene":
         from ..solver.api import simulate
         run = simulate(scene, solver_cfg.get("t_end"), method=rec.metadata.get("method"), rtol=solver_cfg.get("rtol"),
-                       atol=solver_cfg.get("atol"), output_interval=solver_cfg.get("output_interval"))
+                       atol=solver_cfg.get("atol"), output_interval=solver_cfg.get("output_interval"),
+                       cross_check=False)
         for k, t in enumerate(run.t):
             key = seconds(to_ns(t))
             if key in recorded:
-                q, w = recorded[key]
-                dq = max(dq, float(np.abs(run.angles[k] - q).max()))
-                dw = max(dw, float(np.abs(run.angular_velocities[k] - w).max()))
-                n += 1
+                compare(key, run.angles[k], run.angular_velocities[k])
     else:
         from ..solver.solver import Solver
         solver = Solver(scene)
@@ -122,10 +315,7 @@ def check(path: str | Path) -> CheckResult:
                 solver = Solver(scene)
             solver.advance(t_end - solver.t, (m.accel.linear.x, m.accel.linear.z))
             if t_end in recorded:
-                q, w = recorded[t_end]
-                dq = max(dq, float(np.abs(solver.angles - q).max()))
-                dw = max(dw, float(np.abs(solver.angular_velocities - w).max()))
-                n += 1
+                compare(t_end, solver.angles, solver.angular_velocities)
     if n == 0:
         raise RecordingError(f"{path}: no recorded joint state matches a re-simulated time")
-    return CheckResult(n, dq, dw, source, rec.truncated)
+    return CheckResult(n, dq, dw, source, rec.truncated, worst_t, tolerance)

@@ -109,12 +109,14 @@ def schema(typename: str) -> str:
 class McapWriter:
     """MCAP writer with profile "ros2": one ros2msg schema per type, one "cdr" channel per topic, sequence numbers
     per topic starting at 1 (the MCAP spec uses 0 for "not set"), chunks compressed as mcap's Writer does by
-    default (zstd). Use it as a context manager. It closes the file only if it opened the file."""
+    default (zstd), CRCs on chunks, data section and summary. Use it as a context manager. It closes the file only if it opened the file."""
 
     def __init__(self, output: str | os.PathLike | IO[bytes], *, compression: CompressionType = CompressionType.ZSTD,
                  chunk_size: int = 1 << 20):
         self._own = open(output, "wb") if isinstance(output, (str, os.PathLike)) else None
-        self._writer = Writer(self._own or output, chunk_size=chunk_size, compression=compression)
+        # chunk CRCs (mcap's default) and the data section CRC, so that `replay --check` finds any damaged byte
+        self._writer = Writer(self._own or output, chunk_size=chunk_size, compression=compression,
+                              enable_data_crcs=True)
         self._writer.start(profile="ros2", library=f"grapefmu/{__version__} mcap-python")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, str]] = {}

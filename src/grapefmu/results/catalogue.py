@@ -46,7 +46,6 @@ class Channel:
     topic: str | None = None     # the ROS topic that carries it (docs/ros.md)
     fmu: bool = True             # an FMU variable
     fmi_causality: str = "output"
-    fmi_initial: str = "exact"   # FMI `initial` of an output
 
     def element_names(self, model: Model) -> list[str]:
         if self.per == "angle":

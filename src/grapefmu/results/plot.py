@@ -5,8 +5,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import GrapefmuError
 from .run import Run
-from .writers import atomic_path
+from .writers import atomic_path, check_target, one_of
+
+#: the figure types plot_run writes (matplotlib's format is taken from the suffix)
+PLOT_TYPES = (".png", ".pdf", ".svg")
+
+
+def check_plot(path: str | Path, option: str = "plot") -> Path:
+    """Refuse, before the run, a path plot_run could not write (unknown type, a directory, not writable)."""
+    return check_target(path, PLOT_TYPES, option)
 
 
 def _pyplot():
@@ -21,6 +30,8 @@ LINES_LIMIT = 8
 
 
 def plot_run(run: Run, path: str | Path, title: str | None = None) -> None:
+    if Path(path).suffix.lower() not in PLOT_TYPES:
+        raise GrapefmuError(f"{path}: unknown figure type {Path(path).suffix!r}; use {one_of(PLOT_TYPES)}")
     if run.scene.model.n_berries > LINES_LIMIT:
         return plot_cluster(run, path, title)
     plt = _pyplot()
@@ -62,11 +73,13 @@ def plot_run(run: Run, path: str | Path, title: str | None = None) -> None:
 
 def _finish(plt, fig, run: Run, path: str | Path, title: str | None) -> None:
     s = run.summary()
+    err = run.ledger_error()
     fig.suptitle(title or f"{run.scene.name}: {s['berries']} berries, {s['collision_count']} impacts, peak contact "
                  f"{s['peak_contact_force']:.3g} N, peak pedicel {s['peak_pedicel_tension']:.3g} N, "
-                 f"ledger error {run.ledger_error():.1e}", fontsize=10)
+                 + ("ledger not meaningful (no energy moved)" if np.isnan(err) else f"ledger error {err:.1e}"),
+                 fontsize=10)
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format=Path(path).suffix.lstrip(".") or "png")
+        fig.savefig(tmp, dpi=110, format=Path(path).suffix.lstrip(".").lower())
     plt.close(fig)
 
 

@@ -15,7 +15,7 @@ from ..model.model import Scene
 from ..physics import observe as obs
 from ..physics.damage import detaching, fatigue
 from ..physics.layout import LEDGER_TERMS, Layout, ledger, layout
-from . import catalogue
+from . import catalogue, trust
 from .impacts import Impacts
 
 
@@ -116,10 +116,17 @@ class Run:
         return catalogue.dissipated(self.snapshot())
 
     def ledger_error(self) -> float:
-        """Largest ledger residual relative to the largest energy that moved through the system."""
-        e = self.energy
-        scale = max(np.max(np.abs(e["stored"])), np.max(np.abs(e["base_work"])), np.max(self.dissipated), 1e-300)
-        return float(np.max(np.abs(e["residual"])) / scale)
+        """Largest ledger residual relative to the run's energy scale (trust.ledger_assessment: the largest of
+        the swing energy, the base's work and the energy dissipated); NaN when that scale is below round-off
+        (trust.LEDGER_FLOOR_PER_BERRY per berry), where a relative error would only measure noise."""
+        return trust.ledger_assessment(self)[0]
+
+    def ledger_report(self) -> str:
+        """The ledger error as the summary shows it: relative, or why it is not meaningful."""
+        err, scale, _ = trust.ledger_assessment(self)
+        if np.isnan(err):
+            return f"not meaningful (energy scale {scale:.3g} J)"
+        return f"{err:.2e} (relative to the energy scale {scale:.3g} J)"
 
     # --- summary --------------------------------------------------------------------------------
     def dissipated_per_berry(self) -> np.ndarray:
@@ -139,7 +146,7 @@ class Run:
 
     def summary(self) -> dict[str, Any]:
         """The catalogue's cluster channels at the end of the run, the berries over the detachment force,
-        impact and per-berry figures, and what the solver did."""
+        impact and per-berry figures, what the solver did, and `warnings` (results/trust.py)."""
         th = self.scene.thresholds
         imp = self.impacts
         per_berry = self.dissipated_per_berry()
@@ -163,6 +170,7 @@ class Run:
             **{k: v for k, v in self.stats.items() if k in (
                 "method", "steps", "rejected", "rhs_evaluations", "zeno_guard_activations", "wall_time",
                 "degrees_of_freedom", "candidate_pairs", "near_pairs_mean", "near_list_rebuilds")},
+            "warnings": trust.warnings(self),  # one line each where the results cannot be trusted
         }
 
     @property

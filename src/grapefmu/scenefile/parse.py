@@ -15,11 +15,14 @@ from ..model import excitation as exc
 from . import validate as v
 from ..model.contact import LAWS, ContactLaw, hertz_stiffness, hunt_crossley_chi, kelvin_voigt_damping
 from ..model.model import Berry, ContactPair, Coupling, Model, Scene, SolverSettings, Thresholds
+from .budget import check_state
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
 #: The largest initial overlap accepted, as a fraction of the smaller radius: beyond it the
 #: linear contact laws are far outside their calibration and the start is almost surely a typo.
 MAX_OVERLAP_FRACTION = 0.2
+#: scene and sweep files are a few kB (a 300-berry cluster is about 100 kB); a larger file is a wrong path
+MAX_FILE_BYTES = 64 * 2**20
 
 TOP_KEYS = {"name", "gravity", "berries", "contact", "coupling", "excitation", "solver", "thresholds"}
 BERRY_KEYS = {"name", "mass", "radius", "twig_length", "hinge_x", "hinge", "hinge_stiffness", "hinge_damping",
@@ -46,28 +49,48 @@ def default_scene_path() -> Path:
     return Path(str(resources.files("grapefmu") / "scenes" / "default.toml"))
 
 
-def load_scene(path: str | Path) -> Scene:
+def read_text(path: str | Path, what: str = "scene file") -> str:
+    """A small UTF-8 text file; a missing, unreadable, oversized or non-UTF-8 file is a SceneError naming it."""
     path = Path(path)
     try:
-        text = path.read_text()
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_FILE_BYTES + 1)
     except OSError as e:
-        raise SceneError(str(path), f"cannot read scene file: {e.strerror}") from None
-    return parse_scene(text, base_dir=path.parent, name=path.stem)
+        raise SceneError(str(path), f"cannot read {what}: {e.strerror or e}") from None
+    if len(data) > MAX_FILE_BYTES:
+        raise SceneError(str(path), f"a {what} of at most {MAX_FILE_BYTES // 2**20} MiB is expected; this one is larger")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise SceneError(str(path), f"a {what} must be UTF-8 text; byte {data[e.start]:#04x} at offset {e.start} "
+                                    "is not") from None
+
+
+def loads_toml(text: str, where: str = "<toml>") -> dict[str, Any]:
+    """TOML text as a document; every way it can be malformed is a SceneError naming `where`."""
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise SceneError(where, "arrays or tables are nested too deeply to read (a few hundred levels at most)") from None
+    except ValueError as e:  # TOMLDecodeError, and integers of more than 4300 digits
+        raise SceneError(where, f"not valid TOML: {e}") from None
+
+
+def load_scene(path: str | Path) -> Scene:
+    path = Path(path)
+    text = read_text(path)
+    return scene_from_dict(loads_toml(text, str(path)), path.parent, source=text, name=path.stem)
 
 
 def parse_scene(text: str, base_dir: Path | None = None, name: str = "scene") -> Scene:
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise SceneError("<toml>", f"not valid TOML: {e}") from None
-    return scene_from_dict(doc, base_dir or Path.cwd(), source=text, name=name)
+    return scene_from_dict(loads_toml(text), base_dir or Path.cwd(), source=text, name=name)
 
 
 def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name: str = "scene") -> Scene:
     v.no_unknown_keys("", doc, TOP_KEYS)
     name = doc.get("name", name)
     if not isinstance(name, str):
-        raise SceneError("name", f"expected a string, got {name!r}")
+        raise SceneError("name", f"expected a string, got {v.show(name)}")
     gravity = v.number("gravity", doc.get("gravity", 9.81), 0.0, 100.0, unit="m/s²")
     berries, angles, rates = _berries(doc.get("berries"))
     names = [b.name for b in berries]
@@ -75,6 +98,7 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     couplings = _coupling(doc["coupling"], berries) if "coupling" in doc else ()
     model = Model(tuple(berries), tuple(pairs), tuple(couplings), gravity, pruned)
     solver = _solver(doc.get("solver", {}))
+    check_state(len(model.pairs), solver.zeno_max_events)  # values in range that together would not fit
     excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)
     thresholds = _thresholds(doc.get("thresholds", {}))
     _check_overlap(model, angles, names)
@@ -99,7 +123,7 @@ def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
             raise SceneError(f"{key}.hinge", "give hinge_x (on the rod) or hinge = [x, y, z], exactly one")
         nm = b["name"]
         if not isinstance(nm, str) or not NAME_RE.match(nm):
-            raise SceneError(f"{key}.name", f"expected an identifier of letters, digits and _ (at most 32), got {nm!r}")
+            raise SceneError(f"{key}.name", f"expected an identifier of letters, digits and _ (at most 32), got {v.show(nm)}")
         if nm in seen:
             raise SceneError(f"{key}.name", f"duplicate berry name {nm!r}")
         seen.add(nm)
@@ -178,10 +202,10 @@ def _pair_list(key: str, raw: Any, berries: list[Berry], default: list[tuple[int
     out = []
     for n, p in enumerate(raw):
         if not (isinstance(p, list) and len(p) == 2 and all(isinstance(s, str) for s in p)):
-            raise SceneError(f"{key}[{n}]", f"expected [name, name], got {p!r}")
+            raise SceneError(f"{key}[{n}]", f"expected [name, name], got {v.show(p)}")
         for s in p:
             if s not in index:
-                raise SceneError(f"{key}[{n}]", f"unknown berry {s!r}; berries: {', '.join(index)}")
+                raise SceneError(f"{key}[{n}]", f"unknown berry {v.show(s)}; berries: {v.show(', '.join(index))}")
         i, j = index[p[0]], index[p[1]]
         if i == j:
             raise SceneError(f"{key}[{n}]", "a berry cannot pair with itself")
@@ -286,7 +310,7 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
     if kind == "csv":
         f = raw.get("file")
         if not isinstance(f, str):
-            raise SceneError(f"{key}.file", f"expected a path to a CSV of time, ax, az, got {f!r}")
+            raise SceneError(f"{key}.file", f"expected a path to a CSV of time, ax, az, got {v.show(f)}")
         ex = exc.read_csv(base_dir / f, f"{key}.file", v.boolean(f"{key}.hold", raw.get("hold", False)))
         if abs(ex.arrays.table[:, 1:]).max() > acc:
             raise SceneError(f"{key}.file", f"accelerations must stay within ±{acc:g} m/s²")

@@ -2,9 +2,21 @@
 from __future__ import annotations
 
 import math
+import re
+import reprlib
 from typing import Any
 
 from ..errors import SceneError
+
+_SHOW = reprlib.Repr()
+_SHOW.maxlevel, _SHOW.maxlist, _SHOW.maxdict, _SHOW.maxstring, _SHOW.maxlong, _SHOW.maxother = 3, 6, 6, 60, 30, 60
+
+
+def show(value: Any) -> str:
+    """A value as it goes into an error message: short and one line, however long or deep the value is."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 100:
+        return f"an integer of about {int(value.bit_length() * math.log10(2)) + 1} digits"
+    return _SHOW.repr(value).replace("\n", "\\n")
 
 
 def number(key: str, value: Any, lo: float, hi: float, *, lo_open: bool = False,
@@ -14,32 +26,35 @@ def number(key: str, value: Any, lo: float, hi: float, *, lo_open: bool = False,
     rb = ")" if hi_open else "]"
     allowed = f"a number in {lb}{lo:g}, {hi:g}{rb}{(' ' + unit) if unit else ''}"
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(key, f"expected {allowed}, got {type(value).__name__} {value!r}")
-    x = float(value)
+        raise SceneError(key, f"expected {allowed}, got {type(value).__name__} {show(value)}")
+    try:
+        x = float(value)
+    except OverflowError:
+        raise SceneError(key, f"expected {allowed}, got {show(value)}") from None
     if not math.isfinite(x):
-        raise SceneError(key, f"expected {allowed}, got {value!r}")
+        raise SceneError(key, f"expected {allowed}, got {show(value)}")
     if x < lo or x > hi or (lo_open and x == lo) or (hi_open and x == hi):
-        raise SceneError(key, f"expected {allowed}, got {value!r}")
+        raise SceneError(key, f"expected {allowed}, got {show(value)}")
     return x
 
 
 def integer(key: str, value: Any, lo: int, hi: int) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
-        raise SceneError(key, f"expected an integer in [{lo}, {hi}], got {value!r}")
+        raise SceneError(key, f"expected an integer in [{lo}, {hi}], got {show(value)}")
     if not lo <= value <= hi:
-        raise SceneError(key, f"expected an integer in [{lo}, {hi}], got {value!r}")
+        raise SceneError(key, f"expected an integer in [{lo}, {hi}], got {show(value)}")
     return value
 
 
 def choice(key: str, value: Any, allowed: tuple[str, ...]) -> str:
     if not isinstance(value, str) or value not in allowed:
-        raise SceneError(key, f"expected one of {', '.join(repr(a) for a in allowed)}, got {value!r}")
+        raise SceneError(key, f"expected one of {', '.join(repr(a) for a in allowed)}, got {show(value)}")
     return value
 
 
 def boolean(key: str, value: Any) -> bool:
     if not isinstance(value, bool):
-        raise SceneError(key, f"expected true or false, got {value!r}")
+        raise SceneError(key, f"expected true or false, got {show(value)}")
     return value
 
 
@@ -53,16 +68,17 @@ def no_unknown_keys(key: str, tbl: dict, known: set[str]) -> None:
     unknown = sorted(set(tbl) - known)
     if unknown:
         where = f"{key}." if key else ""
-        raise SceneError(f"{where}{unknown[0]}", f"unknown key; allowed keys here: {', '.join(sorted(known))}")
+        name = unknown[0] if re.fullmatch(r"[A-Za-z0-9_-]{1,64}", unknown[0]) else show(unknown[0])
+        raise SceneError(f"{where}{name}", f"unknown key; allowed keys here: {', '.join(sorted(known))}")
 
 
 def vector2(key: str, value: Any, lo: float, hi: float, unit: str = "") -> tuple[float, float]:
     if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise SceneError(key, f"expected a pair [x, y] of numbers in [{lo:g}, {hi:g}] {unit}, got {value!r}")
+        raise SceneError(key, f"expected a pair [x, y] of numbers in [{lo:g}, {hi:g}] {unit}, got {show(value)}")
     return (number(f"{key}[0]", value[0], lo, hi, unit=unit), number(f"{key}[1]", value[1], lo, hi, unit=unit))
 
 
 def vector(key: str, value: Any, size: int, lo: float, hi: float, unit: str = "") -> tuple[float, ...]:
     if not isinstance(value, (list, tuple)) or len(value) != size:
-        raise SceneError(key, f"expected a list of {size} numbers in [{lo:g}, {hi:g}] {unit}, got {value!r}")
+        raise SceneError(key, f"expected a list of {size} numbers in [{lo:g}, {hi:g}] {unit}, got {show(value)}")
     return tuple(number(f"{key}[{k}]", x, lo, hi, unit=unit) for k, x in enumerate(value))

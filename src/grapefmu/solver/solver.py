@@ -134,7 +134,8 @@ class Solver:
         h = hashlib.blake2b(digest_size=8)
         for part in (M.berry, M.pair, M.coupling, np.array([M.gravity]), self.config, self.excitation.par,
                      self.excitation.table, np.frombuffer(self.method.encode(), np.uint8)):
-            h.update(np.ascontiguousarray(part).tobytes())
+            for field in part.dtype.names or (None,):  # field by field: a record's padding bytes are not data
+                h.update(np.ascontiguousarray(part if field is None else part[field]).tobytes())
         return int.from_bytes(h.digest(), "little")
 
     def get_state(self) -> st.SolverState:
@@ -145,7 +146,7 @@ class Solver:
         """Restore a state from get_state of a solver of the same scene and method; anything else, or a
         corrupted state, is refused with a StateError naming the field, and the solver keeps its own."""
         st.check(state, self.state, self.excitation.breaks.shape[0])
-        self.state = st.copy(state)
+        self.state = st.adopt(state, self.state)
 
     @property
     def t(self) -> float:
@@ -340,7 +341,7 @@ class Solver:
         impacts.append(rec.impacts[: int(cur["n_impacts"][0])])
         t, y, contacts, accel, totals = (concat([c[i] for c in chunks]) for i in range(5))
         stats = self.stats | {"wall_time": wall, "method": self.method, "t_start": t_start, "rtol": self.rtol,
-                              "atol": self.atol}
+                              "atol": self.atol, "fixed_step": self.fixed_step}
         return Run(self.scene, t, y, contacts, accel, totals,
                    Impacts.from_records(concat(impacts), self._open_impacts()),
                    self.state.book.pair["peak_force"].copy(), self.state.book.peak_tension.copy(), stats)

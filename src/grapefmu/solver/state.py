@@ -141,6 +141,14 @@ def copy(state: SolverState) -> SolverState:
         BroadPhase(B.near.copy(), B.count.copy(), B.reference.copy()), state.fingerprint.copy())
 
 
+def adopt(state: SolverState, template: SolverState) -> SolverState:
+    """A copy of a checked `state` in the template's own dtypes: a record array read back from bytes has lost
+    its aligned flag, and the compiled core would otherwise be specialised (and fail) for it."""
+    want = flatten(template)
+    return unflatten({k: np.frombuffer(bytearray(a.tobytes()), want[k].dtype).reshape(a.shape) if a.dtype.names
+                      else a.astype(want[k].dtype) for k, a in flatten(state).items()})
+
+
 def _fields(a: np.ndarray):
     """(name, values) of an array, field by field for a record array."""
     if a.dtype.names:

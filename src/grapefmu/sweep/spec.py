@@ -19,7 +19,6 @@ import copy
 import hashlib
 import itertools
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -28,8 +27,9 @@ import numpy as np
 
 from ..errors import SceneError
 from ..scenefile import validate as v
+from ..scenefile.parse import loads_toml, read_text
 
-KEY_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+|\*)\])?")
+KEY_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d{1,9}|\*)\])?")
 SPEC_KEYS = {"scene", "mode", "samples", "seed", "parameters"}
 PARAM_KEYS = {"key", "values", "distribution", "low", "high", "mean", "sd"}
 MAX_RUNS = 1_000_000
@@ -77,22 +77,14 @@ class SweepSpec:
 
 def load_spec(path: str | Path) -> SweepSpec:
     path = Path(path)
-    try:
-        text = path.read_text()
-        doc = tomllib.loads(text)
-    except OSError as e:
-        raise SceneError(str(path), f"cannot read sweep spec: {e.strerror}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise SceneError(str(path), f"not valid TOML: {e}") from None
+    text = read_text(path, "sweep spec")
+    doc = loads_toml(text, str(path))
     v.no_unknown_keys("", doc, SPEC_KEYS)
     if not isinstance(doc.get("scene"), str):
         raise SceneError("scene", "expected the path of the base scene TOML")
     scene_path = path.parent / doc["scene"]
-    try:
-        scene_text = scene_path.read_text()
-    except OSError as e:
-        raise SceneError("scene", f"cannot read {scene_path}: {e.strerror}") from None
-    base = tomllib.loads(scene_text)
+    scene_text = read_text(scene_path)
+    base = loads_toml(scene_text, str(scene_path))
     mode = v.choice("mode", doc.get("mode", "grid"), ("grid", "monte-carlo"))
     raw = doc.get("parameters")
     if not isinstance(raw, list) or not raw:

@@ -1,0 +1,53 @@
+"""The FMI cross-check package: laid out and valid by fmpy's cross-check tooling, and the FMU re-simulated
+by fmpy from the package's own input reproduces the package's reference."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("fmpy")
+ROOT = Path(__file__).resolve().parents[1]
+
+SIMULATE = """
+import sys
+import numpy as np
+from fmpy import simulate_fmu
+from fmpy.util import read_csv, read_ref_opt_file
+from fmpy.cross_check import validate_result
+d, name = sys.argv[1], sys.argv[2]
+opt = read_ref_opt_file(f"{d}/{name}_ref.opt")
+ref = read_csv(f"{d}/{name}_ref.csv")
+res = simulate_fmu(f"{d}/{name}.fmu", start_time=opt["StartTime"], stop_time=opt["StopTime"],
+                   output_interval=opt["StepSize"], input=read_csv(f"{d}/{name}_in.csv"),
+                   output=list(ref.dtype.names[1:]))
+print("PROBLEM", validate_result(res, ref, opt["StartTime"], opt["StopTime"]))
+for kind in ("angle_", "angular_velocity_"):
+    print("WORST", kind, max(float(np.max(np.abs(np.interp(ref["time"], res["time"], res[n]) - ref[n])))
+                             for n in ref.dtype.names[1:] if n.startswith(kind)))
+"""
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_cross_check_package_is_valid_and_reproduces_its_reference(tmp_path, fmi):
+    from fmpy.cross_check.validate_vendor_repo import validate_test_fmu
+    r = subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", "--fmi", str(fmi), "-o",
+                        str(tmp_path / "x.fmu"), "--cross-check", str(tmp_path / "xc")], cwd=ROOT,
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    folder = tmp_path / "xc" / "fmus" / f"{fmi}.0" / "cs"
+    (model,) = [p for p in folder.rglob("*_ref.opt")]
+    d, name = model.parent, model.name[: -len("_ref.opt")]
+    assert {p.name for p in d.iterdir()} == {f"{name}.fmu", f"{name}_in.csv", f"{name}_ref.csv", f"{name}_ref.opt",
+                                            "ReadMe.txt"}
+    assert validate_test_fmu(str(d)) == []
+    out = subprocess.run([sys.executable, "-c", SIMULATE, str(d), name], capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "PROBLEM None" in out.stdout
+    worst = {line.split()[1]: float(line.split()[2]) for line in out.stdout.splitlines() if line.startswith("WORST")}
+    assert worst["angle_"] < 1e-6 and worst["angular_velocity_"] < 1e-5, worst  # rad, rad/s
+    ref = np.genfromtxt(d / f"{name}_ref.csv", delimiter=",", names=True)
+    assert np.max(np.abs(ref["angle_left"])) > 1e-2  # the reference is not a cluster at rest

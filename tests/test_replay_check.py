@@ -1,0 +1,194 @@
+"""Issue 16, item 4: `grapefmu replay FILE --check` tells a truncated recording (a killed writer: checked up
+to its last complete chunk, exit 0) from a corrupted one (a CRC, parse or decode failure: one line naming
+the record, non-zero exit), and any deviation above the tolerance fails the check."""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from mcap.reader import make_reader
+from mcap.writer import CompressionType
+
+from grapefmu.cli import main
+from grapefmu.errors import GrapefmuError, RecordingError
+from grapefmu.recording.mcap_writer import write_mcap
+from grapefmu.recording.replay import TOLERANCE, CorruptRecording, check
+from grapefmu.recording.typestore import McapWriter, deserialize
+from grapefmu.scenefile import default_scene_path, load_scene
+from grapefmu.solver.api import simulate
+
+FUZZ = settings(max_examples=300, deadline=None, derandomize=True, database=None,
+                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory):
+    """The default scene for 0.05 s: written by the command line (one zstd chunk), by the library's writer
+    in small chunks, so that a cut leaves some complete chunks behind, and in small uncompressed chunks (as
+    the ROS node records)."""
+    d = tmp_path_factory.mktemp("rec")
+    cli = d / "cli.mcap"
+    assert main(["simulate", "--t-end", "0.05", "--out", str(cli)]) == 0
+    small = d / "chunked.mcap"
+    write_mcap(simulate(load_scene(default_scene_path()), 0.05), small, chunk_size=2048)
+    plain = d / "plain.mcap"
+    rewrite(small, plain, lambda *_: None, CompressionType.NONE)
+    return {"cli": cli, "chunked": small, "plain": plain}
+
+
+def messages(path: Path) -> list | None:
+    """(metadata, [(topic, log time, CDR bytes)]) read by mcap's own reader without CRC checks, or None when
+    it cannot read them: what a check that passes must have seen."""
+    try:
+        with open(path, "rb") as fh:
+            reader = make_reader(fh)
+            meta = [(m.name, dict(m.metadata)) for m in reader.iter_metadata()]
+            msgs = [(c.topic, m.log_time, bytes(m.data)) for _, c, m in reader.iter_messages(log_time_order=False)]
+        return [meta, msgs]
+    except Exception:  # noqa: BLE001 - any failure: not readable
+        return None
+
+
+def replay(path: Path, capsys) -> tuple[int, str]:
+    rc = main(["replay", str(path), "--check"])
+    out = capsys.readouterr()
+    return rc, out.out + out.err
+
+
+def test_an_intact_recording_passes(recordings, capsys):
+    for path in recordings.values():
+        r = check(path)
+        assert r.ok and r.truncated is None and r.max_deviation == 0.0 and r.compared == 51
+        rc, out = replay(path, capsys)
+        assert rc == 0 and "51 joint states compared" in out
+
+
+@pytest.mark.parametrize("fraction", [0.3, 0.5, 0.7, 0.9, 0.97, 0.999])
+def test_a_truncated_recording_is_checked_up_to_its_last_complete_chunk(recordings, tmp_path, capsys, fraction):
+    data = recordings["chunked"].read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: int(fraction * len(data))])
+    r = check(cut)
+    assert r.ok and r.truncated and "truncated" in r.truncated and 0 < r.compared <= 51
+    rc, out = replay(cut, capsys)
+    assert rc == 0 and "truncated" in out and "Traceback" not in out
+    assert len([line for line in out.splitlines() if "truncated" in line]) == 1
+
+
+def test_a_recording_cut_before_its_metadata_is_refused_in_one_line(recordings, tmp_path, capsys):
+    cut = tmp_path / "cut.mcap"
+    for n in (0, 5, 30, 300):
+        cut.write_bytes(recordings["chunked"].read_bytes()[:n])
+        with pytest.raises(RecordingError):
+            check(cut)
+        rc, out = replay(cut, capsys)
+        assert rc != 0 and len(out.strip().splitlines()) == 1
+
+
+def fuzz_one(original: Path, damaged: bytes, tmp_path: Path) -> None:
+    """The property: a named error, or a check that passes only when the damaged file's messages and
+    metadata are exactly the original's; never another exception, never a truncation claimed for a file
+    of full length."""
+    path = tmp_path / "damaged.mcap"
+    path.write_bytes(damaged)
+    try:
+        r = check(path)
+    except GrapefmuError as e:
+        assert "\n" not in str(e)
+        return
+    assert r.truncated is None, r.truncated  # the file has its full length: nothing was cut off
+    if r.ok:
+        assert messages(path) == messages(original), "a damaged recording passed the check"
+
+
+@pytest.mark.parametrize("which", ["cli", "chunked", "plain"])
+def test_bit_flips_are_never_reported_as_success(recordings, tmp_path, which):
+    data = recordings[which].read_bytes()
+
+    @FUZZ
+    @given(offset=st.integers(0, len(data) - 1), bit=st.integers(0, 7))
+    def flip(offset, bit):
+        b = bytearray(data)
+        b[offset] ^= 1 << bit
+        fuzz_one(recordings[which], bytes(b), tmp_path)
+
+    flip()
+
+
+def test_garbage_runs_are_never_reported_as_success(recordings, tmp_path):
+    data = recordings["chunked"].read_bytes()
+
+    @FUZZ
+    @given(offset=st.integers(0, len(data) - 1), garbage=st.binary(min_size=1, max_size=24))
+    def overwrite(offset, garbage):
+        b = bytearray(data)
+        b[offset: offset + len(garbage)] = garbage
+        fuzz_one(recordings["chunked"], bytes(b[: len(data)]), tmp_path)
+
+    overwrite()
+
+
+def test_a_damaged_chunk_is_named_with_its_offset_and_time(recordings, tmp_path, capsys):
+    data = bytearray(recordings["chunked"].read_bytes())
+    with open(recordings["chunked"], "rb") as fh:
+        chunk = make_reader(fh).get_summary().chunk_indexes[3]
+    data[chunk.chunk_start_offset + chunk.chunk_length - 10] ^= 0x10  # inside the chunk's compressed data
+    path = tmp_path / "flipped.mcap"
+    path.write_bytes(bytes(data))
+    with pytest.raises(CorruptRecording, match=f"chunk at byte {chunk.chunk_start_offset} .messages logged"):
+        check(path)
+    rc, out = replay(path, capsys)
+    assert rc != 0 and len(out.strip().splitlines()) == 1 and f"chunk at byte {chunk.chunk_start_offset}" in out
+    r = subprocess.run([sys.executable, "-m", "grapefmu", "replay", str(path), "--check"], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode != 0 and "Traceback" not in r.stderr and "corrupted" in r.stderr
+
+
+def rewrite(original: Path, out: Path, change, compression=CompressionType.ZSTD) -> None:
+    """Copy a recording message by message through the typestore, `change(topic, log_time, message)`
+    editing the decoded message in place (the CRCs are those of the new bytes)."""
+    with open(original, "rb") as fh:
+        reader = make_reader(fh)
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages()]
+    with McapWriter(out, compression=compression, chunk_size=2048) as w:
+        for name, data in meta.items():
+            w.add_metadata(name, data)
+        for typename, topic, t, data in msgs:
+            m = deserialize(data, typename)
+            change(topic, t, m)
+            w.write(topic, m, t)
+
+
+@pytest.mark.parametrize("field, delta, passes", [("position", 1e-3, False), ("velocity", 0.82, False),
+                                                  ("position", 1e-9, True)])
+def test_a_deviation_above_the_tolerance_fails(recordings, tmp_path, capsys, field, delta, passes):
+    def perturb(topic, t, m):
+        if topic == "joint_states" and t == 20_000_000:
+            v = getattr(m, field).copy()
+            v[1] += delta
+            setattr(m, field, v)
+    path = tmp_path / "perturbed.mcap"
+    rewrite(recordings["chunked"], path, perturb)
+    r = check(path)
+    assert r.truncated is None and r.compared == 51
+    assert r.max_deviation == pytest.approx(delta, rel=1e-3) and r.ok is passes and (delta < TOLERANCE) is passes
+    rc, out = replay(path, capsys)
+    if passes:
+        assert rc == 0
+    else:
+        assert rc == 1 and "t = 0.020000 s" in out and "tolerance" in out
+
+
+def test_a_nan_in_a_recorded_angle_is_a_deviation(recordings, tmp_path):
+    def poison(topic, t, m):
+        if topic == "joint_states" and t == 30_000_000:
+            m.position = m.position.copy()
+            m.position[0] = float("nan")
+    path = tmp_path / "nan.mcap"
+    rewrite(recordings["chunked"], path, poison)
+    assert not check(path).ok
