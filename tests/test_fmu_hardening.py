@@ -85,10 +85,11 @@ def reference_angles(stop, dt, accel):
 
 
 @pytest.mark.skipif(shutil.which("cc") is None, reason="needs a C compiler")
-@pytest.mark.parametrize("fmi", [2, 3])
-def test_a_c_host_without_python_runs_the_fmu_and_exits_cleanly(fmus, tmp_path, fmi):
+@pytest.mark.parametrize("fmi,recorded", [(2, True), (3, True), (2, False)])
+def test_a_c_host_without_python_runs_the_fmu_and_exits_cleanly(fmus, tmp_path, fmi, recorded):
     """A plain C program (no Python in the process, empty environment) loads the FMU's binary, steps 1 s
-    with a held acceleration, reads the angles, frees the instance and exits 0."""
+    with a held acceleration, reads the angles, frees the instance and exits 0. With recorded=False the
+    FMU's record of the build machine's Python is gone and the documented variables say where it is."""
     from fmpy import read_model_description
     from grapefmu_fmu.shim import headers
     exe = tmp_path / "host"
@@ -100,9 +101,15 @@ def test_a_c_host_without_python_runs_the_fmu_and_exits_cleanly(fmus, tmp_path, 
     md = read_model_description(str(fmu))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     accel = (2.0, -1.0)
+    env = {"PATH": os.environ.get("PATH", "/usr/bin")}
+    if not recorded:
+        import sysconfig
+        (unzipped / "resources" / "python.txt").unlink()
+        env.update(GRAPEFMU_PYTHON=sys.executable, GRAPEFMU_LIBPYTHON=str(
+            Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("INSTSONAME")))
     r = subprocess.run([str(exe), str(unzipped), md.coSimulation.modelIdentifier, str(STOP), "0.001", *map(str, accel),
                         str(vr["base_ax"]), str(vr["base_az"]), str(vr["angle_left"]), str(vr["angle_right"])],
-                       capture_output=True, text=True, timeout=600, env={"PATH": os.environ.get("PATH", "/usr/bin")})
+                       capture_output=True, text=True, timeout=600, env=env)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "host: clean exit" in r.stderr
     got = np.loadtxt(r.stdout.splitlines())

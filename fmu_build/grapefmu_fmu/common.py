@@ -69,14 +69,15 @@ class GrapeSlaveMixin:
         self.phase = "instantiated"  # -> "initialization" -> "step"
 
     def _register(self, var) -> None:
-        kw = {"description": var.description, **self._accessors(var.name), **self.KINDS[var.causality, var.type == "real"]}
+        kw = {"description": var.description, **self._accessors(var), **self.KINDS[var.causality, var.type == "real"]}
         if self.UNITS and var.type == "real" and var.unit not in ("", "1"):
             kw["unit"] = var.unit
         self.register_variable(self.TYPES[var.type](var.name, **kw))
 
-    def _accessors(self, name: str) -> dict:
-        values = self.core.values
-        return {"getter": lambda: values[name], "setter": lambda x: values.__setitem__(name, x)}
+    def _accessors(self, var) -> dict:
+        core, values, name = self.core, self.core.values, var.name
+        getter = (lambda: core.output(name)) if var.causality == "output" else (lambda: values[name])
+        return {"getter": getter, "setter": lambda x: values.__setitem__(name, x)}
 
     @classmethod
     def _refuse(cls, message: str, status: int = ERROR) -> None:

@@ -50,7 +50,9 @@ class FmuCore:
         for v in self.vars:
             if v.channel is not None and v.causality == "output":
                 plan.setdefault(v.channel.name, (v.channel, []))[1].append((v.name, v.element, cast[v.type]))
-        self._outputs = list(plan.values())  # (channel, [(variable, element, cast)]): what each step fills
+        self._channel_of = {name: plan[c.name] for c, targets in plan.values() for name, _, _ in targets}
+        self._fresh: set[str] = set()  # outputs already evaluated on the current state
+        self._snap = None              # the current state's snapshot, made when an output is first read
         self.values: dict[str, float | int | bool] = self._start_values()
         self.solver: Solver | None = None
         self.error: str | None = None
@@ -134,7 +136,7 @@ class FmuCore:
             self.start_time = start_time
             self.solver = Solver(self.scene, t_start=start_time, max_steps=STEP_BUDGET)
             self.error = None
-            self._update_outputs()
+            self._stale()
         except GrapefmuError as e:
             self.solver = None
             self.error = f"initialization refused: {e}"
@@ -175,17 +177,25 @@ class FmuCore:
         except GrapefmuError as e:
             return DISCARD, f"step [{t:.9g}, {t + dt:.9g}] s not taken, the FMU keeps its state: {e}"
         self.solver.take_impacts()  # the totals count them; keep the list of finished impacts from growing
-        self._update_outputs()
+        self._stale()
         return None
 
-    def _update_outputs(self) -> None:
-        """Every output from the catalogue: each channel evaluated once on the solver's snapshot."""
-        snap = self.solver.snapshot()
-        values = self.values
-        for channel, targets in self._outputs:
-            v = np.asarray(channel.value(snap))[0]
-            for name, k, cast in targets:
-                values[name] = cast(v[k] if v.ndim else v)
+    def _stale(self) -> None:
+        self._fresh.clear()
+        self._snap = None
+
+    def output(self, name: str):
+        """An output's value on the current state. Outputs are evaluated when first read after a step, one
+        catalogue channel at a time on one snapshot, so a master that reads a few pays for a few."""
+        if name not in self._fresh and self.solver is not None:
+            channel, targets = self._channel_of[name]
+            if self._snap is None:
+                self._snap = self.solver.snapshot()
+            v = np.asarray(channel.value(self._snap))[0]
+            for target, k, cast in targets:
+                self.values[target] = cast(v[k] if v.ndim else v)
+                self._fresh.add(target)
+        return self.values[name]
 
     # --- FMU state --------------------------------------------------------------------------------
     def get_state(self) -> dict:
@@ -209,6 +219,7 @@ class FmuCore:
         self.values.clear()  # in place: the FMI variables' getters and setters hold this dict
         self.values.update(values)
         self.error = state["error"]
+        self._stale()
 
     @staticmethod
     def state_to_bytes(state: dict) -> bytes:

@@ -166,6 +166,12 @@ static const char* load(const char* resources, char* why, size_t n)
         setenv("PYTHONUTF8", "1", 0); /* files are UTF-8 whatever locale the host runs in */
         init(0);
         save(); /* release the GIL: every FMI call takes it with PyGILState_Ensure */
+        /* Finalize at process exit, not when the host unloads the FMU (a handler of a library runs when it
+           is unloaded, and finalizing there left the heap to abort the host at exit): keep this library
+           loaded while the interpreter it started lives. */
+        Dl_info self;
+        dladdr((void*)&grapefmu_refuse, &self);
+        dlopen(self.dli_fname, RTLD_NOW | RTLD_NOLOAD | RTLD_NODELETE);
         atexit(stop_python);
     }
     if (!inner_library) {
@@ -175,7 +181,7 @@ static const char* load(const char* resources, char* why, size_t n)
         snprintf(path, sizeof path, "%s", self.dli_fname);
         char* slash = strrchr(path, '/');
         snprintf(slash ? slash + 1 : path, sizeof path - (slash ? (size_t)(slash + 1 - path) : 0), "%s", INNER_LIBRARY);
-        inner_library = dlopen(path, RTLD_NOW | RTLD_LOCAL | RTLD_DEEPBIND);
+        inner_library = dlopen(path, RTLD_NOW | RTLD_LOCAL);
         if (!inner_library) {
             snprintf(why, n, "cannot load %s: %s", path, dlerror());
             err = why;

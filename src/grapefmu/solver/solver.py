@@ -39,6 +39,8 @@ SKIN_FRACTION = 0.5
 #: the largest base acceleration any face accepts, m/s² (about 100 g: beyond any gripper, so a unit mistake)
 MAX_ACCEL = 1e3
 
+NO_IMPACTS = Impacts.from_records(np.zeros(0, dtype=st.IMPACT))
+
 STATUS_TEXT = {
     MAX_STEPS: "the step limit was reached",
     STEP_UNDERFLOW: "the step size fell below the resolution of time (the problem is too stiff for this tolerance)",
@@ -287,8 +289,10 @@ class Solver:
 
     def take_impacts(self) -> Impacts:
         """Impacts that ended since the last call (during step() or advance()), oldest first."""
+        if not self._closed:
+            return NO_IMPACTS  # the common case when a face steps: no new record to build
         rows, self._closed = self._closed, []
-        return Impacts.from_records(concat(rows) if rows else np.zeros(0, dtype=st.IMPACT))
+        return Impacts.from_records(concat(rows))
 
     def _fail(self, status: int, before: st.SolverState) -> None:
         t = self.t
