@@ -84,7 +84,7 @@ def lockstep(node, steps=2000, dt=1e-3):
 
 def main():
     rclpy.init()
-    node = rclpy.create_node("bench")
+    node = rclpy.create_node("bench", namespace="/grape_cluster")
     print("real-time mode, 1 kHz, default scene, 6 s:")
     with tempfile.TemporaryDirectory() as d:
         for label, rec in (("no recording", None), ("recording to MCAP", f"{d}/r.mcap")):

@@ -14,6 +14,7 @@ if [ ! -f "$stamp" ]; then
   .venv/bin/python -m pip install --quiet -e ".[test]"
   touch "$stamp"
 fi
+bash ros_node/interfaces/build.sh .venv   # tf2_msgs and grapefmu_msgs, which the index does not serve
 case "$job" in
   main)
     mkdir -p out

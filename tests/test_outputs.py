@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from grapefmu import simulate
-from grapefmu.recording.messages import IMPACT_FIELDS
+from grapefmu.recording.messages import absolute, relative
 from grapefmu.write import write_run
 
 from .conftest import dual, scene
@@ -25,12 +25,13 @@ def test_csv_has_the_named_columns_and_values(run, tmp_path):
     path = tmp_path / "run.csv"
     write_run(run, path)
     data = np.genfromtxt(path, delimiter=",", names=True)
-    for col in ("time", "angle_left", "angle_right", "angular_velocity_left", "pedicel_tension_right",
-                "contact_force_left_right", "penetration_left_right"):
+    for col in ("time_s", "angle_left_rad", "angle_right_rad", "angular_velocity_left_rad_s", "pedicel_tension_right_n",
+                "contact_force_left_right_n", "penetration_left_right_m", "energy_kinetic_j", "in_contact_left_right",
+                "collision_count"):  # each named with its unit (a count or a flag has none)
         assert col in data.dtype.names
-    np.testing.assert_allclose(data["angle_right"], run.angles[:, 1], rtol=1e-11, atol=1e-14)
-    np.testing.assert_allclose(data["contact_force_left_right"], run.contact_force[:, 0], rtol=1e-11, atol=1e-14)
-    assert data["contact_force_left_right"].max() > 0
+    np.testing.assert_allclose(data["angle_right_rad"], run.angles[:, 1], rtol=1e-11, atol=1e-14)
+    np.testing.assert_allclose(data["contact_force_left_right_n"], run.contact_force[:, 0], rtol=1e-11, atol=1e-14)
+    assert data["contact_force_left_right_n"].max() > 0
 
 
 def test_parquet_roundtrip_keeps_the_scene(run, tmp_path):
@@ -38,7 +39,7 @@ def test_parquet_roundtrip_keeps_the_scene(run, tmp_path):
     path = tmp_path / "run.parquet"
     write_run(run, path)
     table = pq.read_table(path)
-    np.testing.assert_array_equal(table.column("angle_left").to_numpy(), run.angles[:, 0])
+    np.testing.assert_array_equal(table.column("angle_left_rad").to_numpy(), run.angles[:, 0])
     assert tomllib.loads(table.schema.metadata[b"grapefmu.scene"].decode()) is not None
 
 
@@ -50,22 +51,21 @@ def test_mcap_reads_back_in_rosbags_and_mcap_ros2(run, tmp_path):
     path = tmp_path / "run.mcap"
     write_run(run, path)
     with AnyReader([path]) as r:
-        counts = {c.topic: c.msgcount for c in r.connections}
+        counts = {relative(c.topic): c.msgcount for c in r.connections}
         assert counts["joint_states"] == len(run.t)
         # one message per impact, as many as the independent scipy reference finds
         assert counts["collision_events"] == len(run.impacts) == simulate(run.scene, method="reference").collision_count
-        js = [c for c in r.connections if c.topic == "joint_states"]
+        js = [c for c in r.connections if c.topic == absolute("joint_states")]
         positions = np.array([r.deserialize(raw, c.msgtype).position for c, _, raw in r.messages(connections=js)])
         np.testing.assert_array_equal(positions, run.angles)
-        ev = [c for c in r.connections if c.topic == "collision_events"]
-        fields = IMPACT_FIELDS.index("peak_force")
-        peaks = [r.deserialize(raw, c.msgtype).data[fields] for c, _, raw in r.messages(connections=ev)]
+        ev = [c for c in r.connections if c.topic == absolute("collision_events")]
+        peaks = [r.deserialize(raw, c.msgtype).peak_force for c, _, raw in r.messages(connections=ev)]
         np.testing.assert_allclose(sorted(peaks), sorted(run.impacts.peak_force))
     with open(path, "rb") as fh:
         reader = make_reader(fh, decoder_factories=[DecoderFactory()])
         meta = {m.name: m.metadata for m in reader.iter_metadata()}
         assert tomllib.loads(meta["grapefmu"]["scene_toml"])["berries"][0]["name"] == "left"
-        efforts = [m.effort for _, _, _, m in reader.iter_decoded_messages(topics=["joint_states"])]
+        efforts = [m.effort for _, _, _, m in reader.iter_decoded_messages(topics=[absolute("joint_states")])]
         assert len(efforts) == len(run.t) and all(len(e) == 2 for e in efforts)
     counts = decode_everything(path)
     assert counts["joint_states"] == counts["pedicel_tension"] == counts["summary"] == len(run.t)
@@ -97,4 +97,19 @@ def test_summary_counts_to_the_end_of_the_run_not_its_last_sample():
     assert r.t[-1] < 0.0895 and len(r.impacts) == 1 and r.impacts.onset[0] > r.t[-1]
     s = r.summary()
     assert s["collision_count"] == 1 and s["bruising_impacts"] == int(r.impacts.bruising.sum())
-    assert s["peak_contact_force"] == r.impacts.peak_force.max()
+    assert s["peak_contact_force_n"] == r.impacts.peak_force.max()
+
+
+def test_the_foxglove_layout_is_current_and_names_only_recorded_topics(run, tmp_path):
+    import json
+    from grapefmu.recording import foxglove
+    shipped = json.loads((Path(__file__).resolve().parents[1] / "recordings" / "grapefmu.foxglove.json").read_text())
+    assert shipped == foxglove.layout(run.scene.model)  # regenerated with the command in foxglove.py
+    path = tmp_path / "run.mcap"
+    write_run(run, path)
+    from rosbags.highlevel import AnyReader
+    with AnyReader([path]) as r:
+        recorded = {c.topic for c in r.connections}
+    named = foxglove.topics(shipped)
+    assert named and named <= recorded
+    assert {"/tf", "/tf_static", absolute("robot_description"), absolute("markers"), "/clock"} <= recorded

@@ -15,6 +15,7 @@ from mcap.writer import CompressionType
 
 from grapefmu.cli import main
 from grapefmu.errors import GrapefmuError, RecordingError
+from grapefmu.recording.messages import absolute
 from grapefmu.recording.mcap_writer import write_mcap
 from grapefmu.recording.replay import TOLERANCE, CorruptRecording, check
 from grapefmu.recording.typestore import McapWriter, deserialize
@@ -168,7 +169,7 @@ def rewrite(original: Path, out: Path, change, compression=CompressionType.ZSTD)
                                                   ("position", 1e-9, True)])
 def test_a_deviation_above_the_tolerance_fails(recordings, tmp_path, capsys, field, delta, passes):
     def perturb(topic, t, m):
-        if topic == "joint_states" and t == 20_000_000:
+        if topic == absolute("joint_states") and t == 20_000_000:
             v = getattr(m, field).copy()
             v[1] += delta
             setattr(m, field, v)
@@ -186,7 +187,7 @@ def test_a_deviation_above_the_tolerance_fails(recordings, tmp_path, capsys, fie
 
 def test_a_nan_in_a_recorded_angle_is_a_deviation(recordings, tmp_path):
     def poison(topic, t, m):
-        if topic == "joint_states" and t == 30_000_000:
+        if topic == absolute("joint_states") and t == 30_000_000:
             m.position = m.position.copy()
             m.position[0] = float("nan")
     path = tmp_path / "nan.mcap"

@@ -22,9 +22,11 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from grapefmu_msgs.msg import CollisionEvent, Contacts  # noqa: E402
 
 from grapefmu import Solver, load_scene  # noqa: E402
 from grapefmu.scenefile import default_scene_path  # noqa: E402
+from grapefmu.recording.messages import absolute  # noqa: E402
 from grapefmu.recording.replay import check, read_recording  # noqa: E402
 from grapefmu.recording.stamps import stamp_seconds  # noqa: E402
 
@@ -48,11 +50,11 @@ class Controller:
     """This process's side: publishes rachis/accel, collects what the node publishes."""
 
     def __init__(self, name="test_controller"):
-        self.node = rclpy.create_node(name)
+        self.node = rclpy.create_node(name, namespace="/grape_cluster")  # the node's default namespace
         self.pub = self.node.create_publisher(AccelStamped, "rachis/accel", QOS)
         self.states, self.events, self.diags = [], [], []
         self.node.create_subscription(JointState, "joint_states", self.states.append, QOS)
-        self.node.create_subscription(Float64MultiArray, "collision_events", self.events.append, QOS)
+        self.node.create_subscription(CollisionEvent, "collision_events", self.events.append, QOS)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diags.append, QOS)
         self.reset = self.node.create_client(Trigger, "reset")
         self.pause = self.node.create_client(SetBool, "pause")
@@ -144,7 +146,9 @@ def test_lockstep_answers_at_input_stamps_and_events_match_the_core(ros, tmp_pat
         last = ctl.state_at(rows[-1][0])
         np.testing.assert_array_equal(last.position, solver.angles)
         assert len(onsets) > 0
-        np.testing.assert_allclose(sorted(e.data[1] for e in ctl.events), onsets, atol=1e-12)
+        np.testing.assert_allclose(sorted(stamp_seconds(e.onset.sec, e.onset.nanosec) for e in ctl.events), onsets,
+                                   atol=1e-9)
+        assert all({e.body_a, e.body_b} == {"left", "right"} and e.peak_force > 0 for e in ctl.events)
         assert all(len(s.effort) == 2 for s in ctl.states)
         ctl.close()
     assert check(rec).max_deviation == 0.0
@@ -239,11 +243,12 @@ def test_recordings_read_the_same_in_rosbags_and_mcap_ros2(ros, tmp_path):
     counts = decode_everything(rec)
     assert counts["pedicel_tension"] == counts["joint_states"] == counts["summary"] == counts["contacts"] > 40
     with AnyReader([Path(rec)]) as reader:
-        topics = {c.topic for c in reader.connections}
-        assert {"joint_states", "pedicel_tension", "contact/left_right/wrench", "rachis/accel",
-                "rachis/accel_applied", "markers", "/clock"} <= topics
+        topics = {c.topic for c in reader.connections}  # absolute, as rosbag2 records them
+        assert {absolute(t) for t in ("joint_states", "pedicel_tension", "contact/left_right/wrench", "rachis/accel",
+                                      "rachis/accel_applied", "markers", "/clock", "/tf", "/tf_static",
+                                      "robot_description", "sim_time")} <= topics
         for topic in ("joint_states", "rachis/accel_applied", "contact/left_right/wrench"):
-            conns = [c for c in reader.connections if c.topic == topic]
+            conns = [c for c in reader.connections if c.topic == absolute(topic)]
             theirs = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=conns)]
             ours = [m for _, m in mine.topics[topic]]
             assert len(theirs) == len(ours) > 0
@@ -266,7 +271,7 @@ rclpy.init()
 node = rclpy.create_node("replay_listener")
 got = []
 qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-node.create_subscription(JointState, "joint_states", got.append, qos)
+node.create_subscription(JointState, "/grape_cluster/joint_states", got.append, qos)
 print("READY", flush=True)
 end = time.monotonic() + float(sys.argv[1])
 while time.monotonic() < end:
@@ -308,7 +313,7 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
     from visualization_msgs.msg import MarkerArray
 
     from grapefmu.cli import main as cli
-    from grapefmu.recording.messages import CONTACT_FIELDS, SUMMARY_FIELDS
+    from grapefmu.recording.messages import SUMMARY_FIELDS
 
     scene = tmp_path / "cluster.toml"
     assert cli(["cluster", "--berries", "30", "--seed", "2", "-o", str(scene)]) == 0
@@ -317,7 +322,7 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
         ctl = Controller("cluster_controller")
         summaries, contacts, markers = [], [], []
         ctl.node.create_subscription(Float64MultiArray, "summary", summaries.append, QOS)
-        ctl.node.create_subscription(Float64MultiArray, "contacts", contacts.append, QOS)
+        ctl.node.create_subscription(Contacts, "contacts", contacts.append, QOS)
         ctl.node.create_subscription(MarkerArray, "markers", markers.append, QOS)
         ctl.connect()
         assert not [n for n, _ in ctl.node.get_topic_names_and_types() if n.endswith("/wrench")]
@@ -340,9 +345,12 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
                                                                  solver.observe().contact_force.max(initial=0.0))
     assert final.data[fields.index("collision_count")] == solver.totals()["collision_count"][0] > 0
     assert max(s.data[fields.index("active_pairs")] for s in summaries) > 0
-    busy = [c for c in contacts if c.data]
-    assert busy and busy[0].layout.dim[0].label == ",".join(CONTACT_FIELDS)
-    assert all(len(c.data) == 3 * c.layout.dim[0].size for c in contacts)
+    busy = [c for c in contacts if c.contacts]
+    assert busy
+    names = set(load_scene(scene).model.names)
+    for c in (c for b in busy for c in b.contacts):  # self-describing: both berries, a unit normal, depth, force
+        assert {c.body_a, c.body_b} <= names and c.body_a != c.body_b and c.depth > 0 and c.force >= 0
+        assert abs(np.linalg.norm([c.normal.x, c.normal.y, c.normal.z]) - 1) < 1e-12
     spheres = [m for m in markers[-1].markers if m.ns == "berries"]
     assert len(spheres) == 30 and len({round(m.pose.position.z, 6) for m in spheres}) > 10
     assert check(rec).max_deviation == 0.0

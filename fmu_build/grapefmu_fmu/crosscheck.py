@@ -48,7 +48,7 @@ def write_cross_check(scene_path: str | Path, out: str | Path, fmi: int = 2) -> 
         signal = Path(tmp) / "signal.csv"
         np.savetxt(signal, steps, delimiter=",", header="time,ax,az", comments="", fmt="%.17g")
         doc = tomllib.loads(scene.source)
-        doc["excitation"] = {"kind": "csv", "file": str(signal), "hold": True}
+        doc["excitation"] = {"kind": "csv", "file": str(signal), "hold": True, "after": "hold"}
         run = simulate(scene_from_dict(doc, Path(scene_path).parent, name=scene.name), sv.t_end,
                        output_interval=sv.output_interval)
     m = scene.model

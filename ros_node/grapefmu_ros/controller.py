@@ -8,6 +8,7 @@ commanded acceleration is r² a_nominal(s), so the gripper still ends where the 
 `python -m grapefmu_ros.controller --ros-args -p mode:=gentle`"""
 from __future__ import annotations
 
+import argparse
 import signal
 import sys
 
@@ -20,12 +21,14 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from grapefmu_msgs.msg import CollisionEvent
 from std_msgs.msg import Float64MultiArray
 
 from builtin_interfaces.msg import Time
 
 from grapefmu.model.excitation import pick_and_place
 from grapefmu.physics.excitation import accel
+from grapefmu.recording.messages import NAMESPACE
 from grapefmu.recording.stamps import split, to_ns
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
@@ -38,7 +41,7 @@ def _t(msg_stamp) -> float:
 
 class HarvestController(Node):
     def __init__(self):
-        super().__init__("harvest_controller")
+        super().__init__("harvest_controller", namespace=NAMESPACE)  # the simulator node's default namespace
         d = ParameterDescriptor
         self.declare_parameter("mode", "open_loop", d(description="open_loop or gentle", read_only=True))
         self.declare_parameter("dt", 1e-3, d(description="command period, s", read_only=True))
@@ -53,7 +56,7 @@ class HarvestController(Node):
         self.pub = self.create_publisher(AccelStamped, "rachis/accel", QOS)
         self.create_subscription(JointState, "pedicel_tension", self.on_tension, QOS)
         self.create_subscription(Clock, "/clock", self.on_clock, QOS)
-        self.create_subscription(Float64MultiArray, "collision_events", self.on_event,
+        self.create_subscription(CollisionEvent, "collision_events", self.on_event,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                                             reliability=ReliabilityPolicy.RELIABLE))
         self.create_subscription(Float64MultiArray, "summary", self.on_summary, QOS)
@@ -127,35 +130,66 @@ class HarvestController(Node):
         if self.s >= self.t_move_end + self.get_parameter("settle").value:
             self.done = True
 
-    def start(self, executor):
-        """Wait for the simulator, then send the first command (stamp 0)."""
+    def start(self, executor, stop=()) -> bool:
+        """Wait for the simulator, then send the first command (stamp 0). False if stopped first (`stop`
+        non-empty: SIGINT or SIGTERM arrived)."""
         while self.pub.get_subscription_count() == 0:
+            if stop:
+                return False
             executor.spin_once(timeout_sec=0.1)
         for _ in range(20):  # let the simulator's publishers match ours
+            if stop:
+                return False
             executor.spin_once(timeout_sec=0.05)
         self.command()
+        return True
+
+
+PROG = "python -m grapefmu_ros.controller"
+
+
+def _parse(argv: list[str]) -> None:
+    """--help (ROS arguments, after --ros-args, are rclpy's)."""
+    from rclpy.utilities import remove_ros_args
+    ap = argparse.ArgumentParser(
+        prog=PROG, description="Example harvesting controller: a jerk-limited pick, carry and place of the cluster, "
+        "sent as rachis/accel to a simulator node in lockstep mode (python -m grapefmu_ros --ros-args -p "
+        "mode:=lockstep); prints one RESULT line when the move has ended.",
+        epilog="ROS parameters (--ros-args -p NAME:=VALUE): mode open_loop | gentle (default open_loop), dt command "
+               "period in s (default 0.001), contact_force_limit N (default 0.5), tension_limit N (default 0.25), "
+               "min_rate (default 0.3), settle s (default 0.5). SIGINT or SIGTERM stops it at once.")
+    ap.parse_args(remove_ros_args(argv)[1:])
 
 
 def main(args=None):
+    _parse(sys.argv if args is None else args)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = []
-    signal.signal(signal.SIGINT, lambda *_: stop.append(True))
-    signal.signal(signal.SIGTERM, lambda *_: stop.append(True))
+    signal.signal(signal.SIGINT, lambda signum, _: stop.append(signum))
+    signal.signal(signal.SIGTERM, lambda signum, _: stop.append(signum))
     node = HarvestController()
     ex = rclpy.executors.SingleThreadedExecutor()
     ex.add_node(node)
+    print(f"{PROG}: {node.mode}: waiting for a simulator node on rachis/accel", file=sys.stderr, flush=True)
+    started = False
     try:
-        node.start(ex)
+        started = node.start(ex, stop)
         while not stop and not node.done:
-            ex.spin_once(timeout_sec=1.0)
-        for _ in range(10):  # collect the last events
-            ex.spin_once(timeout_sec=0.05)
-        print(f"RESULT mode={node.mode} peak_contact_force={node.peak_force:.6g} "
-              f"peak_pedicel_tension={node.peak_tension:.6g} collisions={node.collisions} "
-              f"move_time={node.next_t:.3f}", flush=True)
+            ex.spin_once(timeout_sec=0.2)
+        if node.done:
+            for _ in range(10):  # collect the last events
+                ex.spin_once(timeout_sec=0.05)
+            print(f"RESULT mode={node.mode} peak_contact_force={node.peak_force:.6g} "
+                  f"peak_pedicel_tension={node.peak_tension:.6g} collisions={node.collisions} "
+                  f"move_time={node.next_t:.3f}", flush=True)
     finally:
         node.destroy_node()
         rclpy.shutdown()
+    if not node.done:
+        name = signal.Signals(stop[0]).name if stop else "a signal"
+        where = f"at t = {node.next_t:.3f} s of the move" if started else "while waiting for a simulator node"
+        print(f"{PROG}: stopped by {name} {where}; no result", file=sys.stderr, flush=True)
+        return 128 + int(stop[0]) if stop else 1
     return 0
 
 

@@ -15,6 +15,7 @@ import numpy as np
 import rclpy
 import rclpy.executors
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_srvs.srv import SetBool, Trigger
@@ -22,6 +23,7 @@ from std_srvs.srv import SetBool, Trigger
 from grapefmu import GrapefmuError, Solver, load_scene
 from grapefmu.scenefile import default_scene_path
 from grapefmu.solver.solver import MAX_ACCEL
+from grapefmu.solver.warmup import notice
 from grapefmu.recording import messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
@@ -32,8 +34,14 @@ from .recorder import McapRecorder, metadata
 EVENTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
                         durability=DurabilityPolicy.VOLATILE)
 STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
+#: latched: a late subscriber (RViz, robot_state_publisher, a tf2 buffer) still gets them
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: inputs: a best-effort subscription matches both reliable and best-effort (sensor-data) publishers
+INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
 #: QoS per topic (default STATE_QOS)
-TOPIC_QOS = {"collision_events": EVENTS_QOS, "markers": 10, "/diagnostics": 10, "/clock": 10}
+TOPIC_QOS = {"collision_events": EVENTS_QOS, "markers": 10, "/diagnostics": 10, "/clock": 10, "/tf": 100,
+             "/tf_static": LATCHED_QOS, "robot_description": LATCHED_QOS}
 
 
 def _range(lo, hi):
@@ -42,6 +50,7 @@ def _range(lo, hi):
 
 class SimulatorNode(Node):
     def __init__(self, **kwargs):
+        kwargs.setdefault("namespace", msgs.NAMESPACE)  # `-r __ns:=/other` moves everything, frames included
         super().__init__("grapefmu", **kwargs)
         ro = dict(read_only=True)
         self.declare_parameter("scene", str(default_scene_path()),
@@ -57,11 +66,17 @@ class SimulatorNode(Node):
             floating_point_range=_range(0, MAX_ACCEL)))
         self.declare_parameter("marker_rate_hz", 30.0, ParameterDescriptor(
             description="MarkerArray rate, Hz (0: none)", floating_point_range=_range(0, 1000)))
+        self.declare_parameter("tf_rate_hz", 100.0, ParameterDescriptor(
+            description="/tf rate, Hz (TF listeners interpolate between transforms)",
+            floating_point_range=_range(1, 10000)))
         self.declare_parameter("pose_filter_hz", 20.0, ParameterDescriptor(
             description="Low-pass cutoff for accelerations differentiated from rachis/pose, Hz",
             floating_point_range=_range(0.1, 1000)))
         self.declare_parameter("record", "", ParameterDescriptor(
             description="MCAP file to record every topic to ('' for none)", **ro))
+        self.declare_parameter("gripper_frame", "", ParameterDescriptor(
+            description="TF frame of the gripper holding the rachis, looked up on /tf against `world` ('' for "
+                        "none: inputs come on rachis/accel or rachis/pose)", **ro))
         gp = lambda n: self.get_parameter(n).value  # noqa: E731
         self.mode = gp("mode")
         if self.mode not in ("realtime", "lockstep"):
@@ -69,13 +84,24 @@ class SimulatorNode(Node):
         self.rate = gp("rate_hz")
         self.scene = load_scene(gp("scene"))
         m = self.scene.model
-        self.recorder = McapRecorder(gp("record"), metadata(self.scene, self.mode, self.rate)) if gp("record") else None
+        ns = self.get_namespace()
+        self.prefix = "" if ns == "/" else ns.strip("/") + "/"  # of every TF frame
+        self.recorder = McapRecorder(gp("record"), metadata(self.scene, self.mode, self.rate, ns)) \
+            if gp("record") else None
         topics = ["joint_states", "pedicel_tension", *msgs.wrench_topics(m), "contacts", "summary", "collision_events",
-                  "markers", "/diagnostics", "rachis/accel_applied"] + (["/clock"] if self.mode == "lockstep" else [])
-        self.pubs = {t: self.create_publisher(message_class(msgs.topic_type(t)), t, TOPIC_QOS.get(t, STATE_QOS))
-                     for t in topics}
+                  "markers", "/diagnostics", "rachis/accel_applied", "sim_time", "/tf", "/tf_static",
+                  "robot_description"] + (["/clock"] if self.mode == "lockstep" else [])
+        # no per-publisher QoS-event handlers: rclpy's executor walks every one of them on every spin, which cost
+        # more than the simulation at 1 kHz (incompatible subscribers still get the middleware's own warning)
+        quiet = PublisherEventCallbacks(use_default_callbacks=False)
+        self.pubs = {t: self.create_publisher(message_class(msgs.topic_type(t)), t, TOPIC_QOS.get(t, STATE_QOS),
+                                              event_callbacks=quiet) for t in topics}
+        self.full_names = {t: pub.topic_name for t, pub in self.pubs.items()}  # as recordings name them
         for topic, handler in (("rachis/accel", self.on_accel), ("rachis/pose", self.on_pose)):
-            self.create_subscription(message_class(msgs.topic_type(topic)), topic, handler, STATE_QOS, raw=True)
+            self.create_subscription(message_class(msgs.topic_type(topic)), topic, handler, INPUT_QOS, raw=True)
+        self.gripper_frame = gp("gripper_frame")
+        if self.gripper_frame:
+            self.create_subscription(message_class(msgs.topic_type("/tf")), "/tf", self.on_tf, INPUT_QOS, raw=True)
         self.create_service(Trigger, "reset", self.on_reset)
         self.create_service(SetBool, "pause", self.on_pause)
         self.paused = False
@@ -89,16 +115,27 @@ class SimulatorNode(Node):
         self._diag_last = (time.monotonic(), time.process_time(), 0.0)
 
     # --- simulation ---------------------------------------------------------------------------------
+    def _stamp(self, t: float) -> int:
+        """The ROS time of simulated time t, ns: the node's clock in real-time mode (the origin is set at every
+        start and resume), the simulated time itself in lockstep mode (which publishes it on /clock)."""
+        return self.origin + to_ns(t)
+
+    def _restart_clock(self):
+        self.wall0, self.sim0 = time.monotonic(), self.solver.t
+        self.origin = 0 if self.mode == "lockstep" else self.get_clock().now().nanoseconds - to_ns(self.solver.t)
+
     def _reset_sim(self):
         self.solver = Solver(self.scene)
         self.accel = (0.0, 0.0)
         self.last_stamp = -math.inf
-        self.wall0 = time.monotonic()
-        self.sim0 = 0.0
+        self._restart_clock()
         self.last_tick = None
-        self._last_marker = -math.inf
+        self._last = {}  # rate parameter -> simulated time its topic was last published
         self._pose = []
         self._pose_acc = np.zeros(2)
+        stamp = self._stamp(self.solver.t)
+        for topic, m in msgs.tf_static(self.scene.model, stamp, self.prefix):
+            self.emit(topic, m, stamp)
         self.publish_state()
 
     def advance(self, dt: float) -> bool:
@@ -111,34 +148,42 @@ class SimulatorNode(Node):
             self.failures += 1
             self.get_logger().error(f"step of {dt:.6g} s refused: {e}", throttle_duration_sec=1.0)
             return False
-        ns = to_ns(self.solver.t)
-        self.emit(*msgs.accel(ns, self.accel, "rachis/accel_applied"), ns)
+        ns = self._stamp(self.solver.t)
+        self.emit(*msgs.accel(ns, self.accel, "rachis/accel_applied", self.prefix), ns)
+        self.emit("sim_time", msgs.clock(to_ns(self.solver.t))[1], ns)  # what replay --check re-simulates
         self.publish_state()
-        for ns, topic, m in msgs.impact_messages(self.solver.take_impacts()):
+        for ns, topic, m in msgs.impact_messages(self.scene.model, self.solver.take_impacts(), self.origin,
+                                                 self.prefix):
             self.emit(topic, m, ns)
         return True
 
     def publish_state(self):
         """Every state topic (messages.py) from the solver's snapshot; markers at marker_rate_hz."""
         t = self.solver.t
-        ns = to_ns(t)
-        rate = self.get_parameter("marker_rate_hz").value
-        markers_due = rate > 0 and t - self._last_marker >= 1.0 / rate - 1e-12
-        if markers_due:
-            self._last_marker = t
+        ns = self._stamp(t)
+        markers_due, tf_due = self._due("marker_rate_hz", t), self._due("tf_rate_hz", t)
         snap = self.solver.snapshot()
         summary = msgs.summary_table(snap)
-        for topic, m in msgs.state_messages(self.scene.model, snap, 0, ns, summary, markers=markers_due):
+        for topic, m in msgs.state_messages(self.scene.model, snap, 0, ns, summary, markers=markers_due, tf=tf_due,
+                                            prefix=self.prefix):
             self.emit(topic, m, ns)
         if "/clock" in self.pubs:
             self.emit(*msgs.clock(ns), ns)
+
+    def _due(self, rate_parameter: str, t: float) -> bool:
+        """Whether the topic published at `rate_parameter` (Hz, 0: never) is due at simulated time t."""
+        rate = self.get_parameter(rate_parameter).value
+        if rate > 0 and t - self._last.get(rate_parameter, -math.inf) >= 1.0 / rate - 1e-12:
+            self._last[rate_parameter] = t
+            return True
+        return False
 
     def emit(self, topic: str, message, ns: int):
         """Serialize once through the typestore; publish and record the same bytes."""
         data = serialize(message)
         self.pubs[topic].publish(data)
         if self.recorder:
-            self.recorder.write(topic, message.__msgtype__, data, ns)
+            self.recorder.write(self.full_names[topic], message.__msgtype__, data, ns)
 
     # --- inputs ---------------------------------------------------------------------------------
     def _valid(self, ax, az, what) -> bool:
@@ -155,7 +200,8 @@ class SimulatorNode(Node):
         msg = deserialize(data, msgs.topic_type(topic))
         t = stamp_seconds(msg.header.stamp.sec, msg.header.stamp.nanosec)
         if self.recorder:
-            self.recorder.write(topic, msg.__msgtype__, serialize(msg), to_ns(max(t, 0.0)))
+            self.recorder.write(msgs.absolute(topic, self.get_namespace()), msg.__msgtype__, serialize(msg),
+                                to_ns(max(t, 0.0)))
         return msg, t
 
     def on_accel(self, data: bytes):
@@ -180,24 +226,37 @@ class SimulatorNode(Node):
         self.accel = (float(ax), float(az))
 
     def on_pose(self, data: bytes):
-        """Acceleration from poses: second difference, then a first-order low-pass at pose_filter_hz."""
         msg, t = self._received("rachis/pose", data)
-        p = np.array([msg.pose.position.x, msg.pose.position.z])
+        self._pose_input(t, np.array([msg.pose.position.x, msg.pose.position.z]), "rachis/pose")
+
+    def on_tf(self, data: bytes):
+        """The gripper frame's pose in `world`, from another node's /tf (this node's own frames are skipped)."""
+        msg = deserialize(data, msgs.topic_type("/tf"))
+        for tr in msg.transforms:
+            if tr.child_frame_id == self.gripper_frame and tr.header.frame_id == msgs.WORLD:
+                t = stamp_seconds(tr.header.stamp.sec, tr.header.stamp.nanosec)
+                if self.recorder:
+                    self.recorder.write("/tf", msg.__msgtype__, data, to_ns(max(t, 0.0)))
+                p = tr.transform.translation
+                self._pose_input(t, np.array([p.x, p.z]), f"/tf {self.gripper_frame}")
+
+    def _pose_input(self, t: float, p: np.ndarray, what: str):
+        """Acceleration from poses: second difference, then a first-order low-pass at pose_filter_hz."""
         if not np.all(np.isfinite(p)):
-            self._valid(math.nan, math.nan, "rachis/pose")
+            self._valid(math.nan, math.nan, what)
             return
         self._pose = (self._pose + [(t, p)])[-3:]
         if len(self._pose) < 3:
             return
         (t0, p0), (t1, p1), (t2, p2) = self._pose
         if not (t0 < t1 < t2):
-            self._valid(math.nan, math.nan, "rachis/pose (stamps must increase)")
+            self._valid(math.nan, math.nan, f"{what} (stamps must increase)")
             return
         v1, v2 = (p1 - p0) / (t1 - t0), (p2 - p1) / (t2 - t1)
         raw = (v2 - v1) / (0.5 * (t2 - t0))
         alpha = 1.0 - math.exp(-2 * math.pi * self.get_parameter("pose_filter_hz").value * (t2 - t1))
         self._pose_acc += alpha * (raw - self._pose_acc)
-        self._input(self._pose_acc[0], self._pose_acc[1], t, "rachis/pose")
+        self._input(self._pose_acc[0], self._pose_acc[1], t, what)
 
     # --- real time ------------------------------------------------------------------------------
     def on_tick(self):
@@ -224,7 +283,7 @@ class SimulatorNode(Node):
             return resp
         self.paused = req.data
         if not self.paused:  # resume: the wall clock restarts from the current simulated time
-            self.wall0, self.sim0 = time.monotonic(), self.solver.t
+            self._restart_clock()
         resp.success, resp.message = True, "paused" if self.paused else "running"
         return resp
 
@@ -246,7 +305,7 @@ class SimulatorNode(Node):
         level = 2 if self.failures else (1 if warn else 0)
         msg = "detachment risk" if detach else ("bruising impacts" if bruising else
                                                 ("inputs rejected" if self.rejected else "ok"))
-        self.emit(*msgs.diagnostics(to_ns(t), level, msg, values), to_ns(t))
+        self.emit(*msgs.diagnostics(self._stamp(t), level, msg, values), self._stamp(t))
 
     def close(self):
         if self.recorder:
@@ -263,14 +322,20 @@ def main(args=None):
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = []
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.append(True))
+        signal.signal(sig, lambda signum, _: stop.append(signal.Signals(signum).name))
     node = None
     try:
+        notice()  # one line before the core's first compile on this machine
         node = SimulatorNode()
+        rec = node.get_parameter("record").value
+        print(f"grapefmu_ros: simulating '{node.scene.name}' in {node.mode} mode under {node.get_namespace()}"
+              f"{f', recording to {rec}' if rec else ''}; Ctrl-C stops", file=sys.stderr, flush=True)
         executor = rclpy.executors.SingleThreadedExecutor()
         executor.add_node(node)
         while not stop:
             executor.spin_once(timeout_sec=0.05)
+        print(f"grapefmu_ros: stopped by {stop[0]} at simulated t = {node.solver.t:.3f} s"
+              f"{f'; {rec} is complete' if rec else ''}", file=sys.stderr, flush=True)
     except GrapefmuError as e:
         print(f"grapefmu_ros: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None

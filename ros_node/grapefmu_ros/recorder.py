@@ -39,8 +39,8 @@ class McapRecorder:
             self._fh.close()
 
 
-def metadata(scene, mode: str, rate_hz: float) -> dict[str, str]:
+def metadata(scene, mode: str, rate_hz: float, namespace: str) -> dict[str, str]:
     s = scene.solver
     return {"grapefmu_version": __version__, "scene_name": scene.name, "scene_toml": scene.source,
-            "method": "event", "input_source": "applied", "node_mode": mode,
+            "method": "event", "input_source": "applied", "node_mode": mode, "namespace": namespace,
             "solver": json.dumps({"rtol": s.rtol, "atol": s.atol, "rate_hz": rate_hz})}

@@ -44,17 +44,26 @@ class Progress:
         self.shown = True
 
 
+def _compile_row(s: dict) -> tuple[str, str] | None:
+    """How long numba took before the run: a compile (cold cache) or a load from the cache."""
+    if "compile_time_s" not in s:
+        return None
+    how = "compiled (first run; later runs load it from the cache)" if s.get("compiled") else "loaded from the cache"
+    return "numba core", f"{s['compile_time_s']:.2f} s, {how}; not in the solver time"
+
+
 def _summary_table(run) -> str:
+    """The summary as a table; every quantity in the unit its key and the CSV columns carry (N, J, s)."""
     s = run.summary()
     rows = [
-        ("simulated", f"{s['t_end']:.4g} s, {s['samples']} samples, method {s['method']}"),
+        ("simulated", f"{s['t_end_s']:.4g} s, {s['samples']} samples, method {s['method']}"),
         ("solver", f"{s.get('steps', '-')} steps, {s.get('rejected', '-')} rejected, "
-                   f"{s.get('rhs_evaluations', '-')} RHS evaluations, {1e3 * s['wall_time']:.2f} ms wall"),
+                   f"{s.get('rhs_evaluations', '-')} RHS evaluations, {s['wall_time_s']:.4g} s wall"),
         ("collisions", str(s["collision_count"])),
-        ("peak contact force", f"{s['peak_contact_force']:.4g} N"),
-        ("peak pedicel tension", f"{s['peak_pedicel_tension']:.4g} N"),
-        ("largest impact energy", f"{1e3 * s['max_impact_energy']:.4g} mJ"),
-        ("energy dissipated", f"{1e3 * s['dissipated_energy']:.4g} mJ"),
+        ("peak contact force", f"{s['peak_contact_force_n']:.4g} N"),
+        ("peak pedicel tension", f"{s['peak_pedicel_tension_n']:.4g} N"),
+        ("largest impact energy", f"{s['max_impact_energy_j']:.4g} J"),
+        ("energy dissipated", f"{s['dissipated_energy_j']:.4g} J"),
         ("energy ledger error", run.ledger_report()),
         ("detachment risk", ("YES: " + ", ".join(s["detached_berries"][:10])
                              + (", ..." if len(s["detached_berries"]) > 10 else ""))
@@ -62,19 +71,29 @@ def _summary_table(run) -> str:
         ("bruising impacts", str(s["bruising_impacts"])),
         ("fatigue impacts", str(s["fatigue_impacts"])),
     ]
+    compiled = _compile_row({**s, "compiled": run.stats.get("compiled")})
+    if compiled:
+        rows.insert(1, compiled)
     if s["berries"] > 2:
         st = run.stats
-        rows.insert(2, ("kept", f"{st.get('degrees_of_freedom', '-')} degrees of freedom, {st.get('candidate_pairs', '-')} "
-                               f"candidate pairs ({run.scene.model.pairs_pruned} never within reach left out), "
-                               f"{st.get('near_pairs_mean', float('nan')):.1f} near pairs per step, "
-                               f"at most {s['max_active_pairs']} in contact, {st.get('groups', 1)} independent group(s)"))
+        rows.insert(3 if compiled else 2,
+                    ("kept", f"{st.get('degrees_of_freedom', '-')} degrees of freedom, "
+                             f"{st.get('candidate_pairs', '-')} candidate pairs ({run.scene.model.pairs_pruned} never within reach left out), "
+                             f"{st.get('near_pairs_mean', float('nan')):.1f} near pairs per step, "
+                             f"at most {s['max_active_pairs']} in contact, {st.get('groups', 1)} independent group(s)"))
         rows.append(("berries over detachment", str(s["berries_over_detachment_force"])))
-        rows.append(("dissipated per berry", f"largest {1e3 * s['max_dissipated_per_berry']:.4g} mJ, "
-                                             f"mean {1e3 * s['mean_dissipated_per_berry']:.4g} mJ"))
+        rows.append(("dissipated per berry", f"largest {s['max_dissipated_per_berry_j']:.4g} J, "
+                                             f"mean {s['mean_dissipated_per_berry_j']:.4g} J"))
     if s.get("zeno_guard_activations"):
         rows.append(("Zeno guard", f"{s['zeno_guard_activations']} activations (resting-contact treatment used)"))
     w = max(len(k) for k, _ in rows)
     return "\n".join(f"  {k:<{w}}  {v}" for k, v in rows)
+
+
+def _compiling() -> None:
+    """Before a command's first run of the core, after its inputs are checked: one line if numba must compile."""
+    from .solver.warmup import notice
+    notice(lambda line: print(f"{_newline()}{line}", file=sys.stderr, flush=True))
 
 
 def cmd_simulate(a: argparse.Namespace) -> int:
@@ -83,24 +102,33 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     from .results.plot import check_plot
     from .solver.api import simulate
     from .solver.budget import check_samples
+    from .model.excitation import check_covers
+    from .solver.warmup import prepare
 
-    if a.out is not None:  # refuse an output that cannot be written before the run, not after it
-        check_output(a.out, "--out")
+    outs = list(dict.fromkeys(a.out or ()))  # every output refused before the run if it cannot be written
+    for out in outs:
+        check_output(out, "--out")
     if a.plot is not None:
         check_plot(a.plot, "--plot")
+    if a.plot is not None and a.plot in outs:
+        raise GrapefmuError(f"--plot {a.plot}: also given as --out; choose another name")
     scene = load_scene(a.scene or default_scene_path())
     if a.t_end is not None:
         check_samples(scene.model, a.t_end, scene.solver.output_interval, "--t-end")
+    check_covers(scene.excitation, scene.solver.t_end if a.t_end is None else a.t_end,
+                 "solver.t_end" if a.t_end is None else "--t-end")
+    warm = prepare(scene, a.method, write=lambda line: print(f"{_newline()}{line}", file=sys.stderr, flush=True))
     run = simulate(scene, a.t_end, method=a.method, rtol=a.rtol, atol=a.atol, progress=Progress("simulate"))
+    run.stats.update(compile_time=warm.seconds, compiled=warm.compiled)
     print(f"scene {scene.name}: {scene.model.n_berries} berries, {len(scene.model.pairs)} contact pairs, "
           f"excitation {scene.excitation.kind}")
     print(_summary_table(run))
     warnings = run.summary()["warnings"]
     for w in warnings:
         print(f"warning: {w}")
-    if a.out:
-        write_run(run, a.out)
-        print(f"wrote {a.out}")
+    for out in outs:
+        write_run(run, out)
+        print(f"wrote {out}")
     if a.plot:
         from .results.plot import plot_run
         plot_run(run, a.plot)
@@ -145,14 +173,26 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     a.output = str(out)  # named if the sweep is interrupted
     if a.workers is not None and not 1 <= a.workers <= 1024:
         raise GrapefmuError(f"--workers: expected an integer in [1, 1024], got {a.workers}")
-    run_sweep(spec, out, workers=a.workers, scheduler=a.scheduler)
+    try:
+        run_sweep(spec, out, workers=a.workers, scheduler=a.scheduler)
+    except KeyboardInterrupt as e:  # say what is kept and how to go on
+        journal = out.with_name(out.name + ".journal.jsonl")
+        try:
+            kept = max(len(journal.read_text().splitlines()) - 1, 0)
+        except OSError:
+            kept = 0
+        e.note = (f"{kept} finished run(s) kept in {journal}; run the same command again to resume" if kept else
+                  "no run had finished; run the same command again to start over")
+        raise
     print(f"wrote {out}")
     return 0
 
 
 def cmd_paper(a: argparse.Namespace) -> int:
     from .paper.reproduce import reproduce
-    return reproduce(check_target(a.out, None, "--out"))
+    out = check_target(a.out, None, "--out")
+    _compiling()
+    return reproduce(out)
 
 
 def face(name: str, needs: str):
@@ -174,6 +214,7 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
     print(f"wrote {out} (FMI {a.fmi}.0 co-simulation)")
     if a.cross_check:
         cross_check = face("cross_check", "the FMU extra (pip install 'grapefmu[fmu]')")
+        _compiling()
         print(f"wrote the FMI cross-check package {cross_check(a.scene or default_scene_path(), a.cross_check, a.fmi)}")
     return 0
 
@@ -184,6 +225,8 @@ def cmd_replay(a: argparse.Namespace) -> int:
             raise GrapefmuError(f"{a.recording}: no such recording (expected an MCAP file written by grapefmu)")
         return face("publish", "ROS 2 (pip install 'grapefmu[ros]')")(a.recording, a.rate)
     from .recording.replay import check
+    if Path(a.recording).is_file():
+        _compiling()
     r = check(a.recording)  # a corrupted file raises CorruptRecording: one line naming the record, exit 2
     if r.truncated:
         print(f"warning: {r.truncated}", file=sys.stderr)
@@ -207,6 +250,7 @@ def cmd_outputs(a: argparse.Namespace) -> int:
 def cmd_bench(a: argparse.Namespace) -> int:
     check_target(a.out, (".md",), "--out")
     check_target(a.plots, None, "--plots")
+    _compiling()
     if a.scale:
         from .bench.scale import main as scale
         return scale(Path(a.out), Path(a.plots))
@@ -214,67 +258,117 @@ def cmd_bench(a: argparse.Namespace) -> int:
     return bench(a.quick, Path(a.out), Path(a.plots))
 
 
+class Help(argparse.HelpFormatter):
+    """Every option's help ends with its default, unless the text already says it (a flag's default is off)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "default" in text or action.default is None or action.default is False \
+                or action.default is argparse.SUPPRESS or not action.option_strings:
+            return text
+        return f"{text} (default: %(default)s)"
+
+
+METHODS = ("event: adaptive Dormand–Prince 5(4), every contact onset and release located exactly (the default); "
+           "paper: the paper's ode23 with contacts checked only at step ends, cross-checked against event; "
+           "reference: scipy solve_ivp (DOP853) with scipy's event location, slow, an independent check "
+           "(docs/solver.md)")
+
+COMMANDS = {  # name: one-line description (also the --help page's first line)
+    "simulate": "Run a scene and report impacts, peak forces, damage and detachment indicators; write the samples "
+                "(CSV, Parquet, MCAP) and a figure.",
+    "paper": "Reproduce tests 1–9 of Xu et al. (2025): figures and a check of each of the paper's claims.",
+    "cluster": "Generate a cluster scene (seeded, spherical twigs) or a planar row of berries as a scene TOML.",
+    "sweep": "Run a grid or Monte Carlo sweep over scene parameters, one Parquet row per run (resumable).",
+    "build-fmu": "Package a scene as an FMI 2 or 3 co-simulation FMU.",
+    "replay": "Check a recording by re-simulating it, or republish its topics on ROS 2.",
+    "outputs": "List every output channel (name, unit, file column, ROS topic, FMU causality) as Markdown.",
+    "bench": "Measure speed against error on hard scenes, side by side with peer methods; write a Markdown report "
+             "and plots (under out/bench unless told).",
+}
+
+
 def build_parser() -> argparse.ArgumentParser:
-    ap = Parser(prog="grapefmu", description="Berries that swing and collide when a gripper moves a grape cluster.")
+    ap = Parser(prog="grapefmu", description="Berries that swing and collide when a gripper moves a grape cluster.",
+                formatter_class=Help)
     ap.add_argument("--version", action="version", version=f"grapefmu {__version__}")
-    sub = ap.add_subparsers(dest="command", required=True)
-    s = sub.add_parser("simulate", help="run a scene and report impacts, peaks and indicators")
-    s.add_argument("scene", nargs="?", help="scene TOML (default: the packaged default scene)")
-    s.add_argument("--t-end", type=float, help="simulated time in s (overrides the scene)")
-    s.add_argument("--rtol", type=float, help="relative tolerance (overrides the scene)")
-    s.add_argument("--atol", type=float, help="absolute tolerance (overrides the scene)")
-    s.add_argument("--method", choices=("event", "paper", "reference"), help="integration method")
-    s.add_argument("--out", help="write samples to .csv, .parquet or .mcap")
-    s.add_argument("--plot", help="write a figure (.png, .pdf or .svg)")
+    sub = ap.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, epilog: str | None = None) -> argparse.ArgumentParser:
+        return sub.add_parser(name, help=COMMANDS[name], description=COMMANDS[name], epilog=epilog,
+                              formatter_class=Help)
+
+    s = command("simulate", "The first run in a fresh checkout compiles the numba core (README.md: how long); "
+                            "later runs load it from the cache.")
+    s.add_argument("scene", nargs="?",
+                   help="scene TOML (default: the packaged default scene, the same as scenes/default.toml)")
+    s.add_argument("--t-end", type=float, metavar="S", help="simulated time in s (default: the scene's solver.t_end)")
+    s.add_argument("--rtol", type=float, help="relative tolerance (default: the scene's solver.rtol)")
+    s.add_argument("--atol", type=float, help="absolute tolerance (default: the scene's solver.atol)")
+    s.add_argument("--method", choices=("event", "paper", "reference"),
+                   help=f"integration method (default: the scene's solver.method). {METHODS}")
+    s.add_argument("--out", action="append", metavar="FILE",
+                   help="write the samples to FILE: .csv, .parquet or .mcap; give it again for more files "
+                        "(--out a.csv --out b.mcap), every one checked before the run (default: none)")
+    s.add_argument("--plot", metavar="FILE", help="write a figure, .png, .pdf or .svg (default: none)")
     s.add_argument("--strict", action="store_true",
                    help="exit with code 3 when the run has warnings (results that cannot be trusted)")
     s.set_defaults(func=cmd_simulate)
-    b = sub.add_parser("build-fmu", help="package a scene as an FMI co-simulation FMU")
+    p = command("paper")
+    p.add_argument("--out", default="out/paper", metavar="DIR", help="directory for the figures and claims.md")
+    p.set_defaults(func=cmd_paper)
+    c = command("cluster")
+    c.add_argument("-o", "--output", required=True, metavar="FILE", help="the scene TOML to write (required)")
+    c.add_argument("--berries", type=int, default=60, help="number of berries")
+    c.add_argument("--seed", type=int, default=1, help="random seed")
+    c.add_argument("--row", action="store_true", help="a planar row on one rod (Newton's cradle) instead")
+    c.add_argument("--pitch", type=float, metavar="M",
+                   help="--row: hinge spacing in m (default: 0.027, touching at rest)")
+    c.add_argument("--precompression", type=float, default=0.0, metavar="M",
+                   help="largest overlap of two berries at rest, m")
+    from .cluster.generate import ClusterSpec
+    for name, unit in (("diameter", "m"), ("twig_length", "m"), ("hinge_stiffness", "N·m/rad"),
+                       ("hinge_damping", "N·m·s/rad")):
+        d = getattr(ClusterSpec, name)
+        c.add_argument(f"--{name.replace('_', '-')}", type=float, nargs=2, metavar=("MEAN", "SD"),
+                       help=f"normal distribution of the {name.replace('_', ' ')}, {unit} "
+                            f"(default: {d.mean:g} {d.sd:g})")
+    c.set_defaults(func=cmd_cluster)
+    w = command("sweep")
+    w.add_argument("spec", help="sweep spec TOML (docs/sweeps.md)")
+    w.add_argument("-o", "--output", metavar="FILE", help="the Parquet file (default: the spec's name with .parquet)")
+    w.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
+    w.add_argument("--scheduler", metavar="ADDRESS",
+                   help="a Dask distributed scheduler, tcp://host:port, instead of local processes (default: none)")
+    w.set_defaults(func=cmd_sweep)
+    b = command("build-fmu")
     b.add_argument("scene", nargs="?", help="scene TOML (default: the packaged default scene)")
-    b.add_argument("-o", "--output", required=True, help="the .fmu file to write")
-    b.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version (default 2)")
+    b.add_argument("-o", "--output", required=True, metavar="FILE", help="the .fmu file to write (required)")
+    b.add_argument("--fmi", type=int, choices=(2, 3), default=2, help="FMI version")
     b.add_argument("--outputs", choices=("full", "summary"),
                    help="per angle, berry and pair, or cluster totals only (default: full up to 16 berries and pairs)")
     b.add_argument("--cross-check", metavar="DIR",
-                   help="also write the FMI cross-check package (FMU, _in.csv, _ref.csv, _ref.opt, ReadMe) under DIR")
+                   help="also write the FMI cross-check package (FMU, _in.csv, _ref.csv, _ref.opt, ReadMe) under DIR "
+                        "(default: none)")
     b.set_defaults(func=cmd_build_fmu)
-    r = sub.add_parser("replay", help="check a recording by re-simulating it, or republish it")
+    r = command("replay")
     r.add_argument("recording", help="an MCAP file written by grapefmu simulate or the ROS node")
     g = r.add_mutually_exclusive_group(required=True)
     g.add_argument("--check", action="store_true", help="re-simulate and report the largest deviation")
-    g.add_argument("--publish", action="store_true", help="republish the recorded topics with /clock")
-    r.add_argument("--rate", type=float, default=1.0, help="with --publish: speed factor (0 = as fast as possible)")
+    g.add_argument("--publish", action="store_true", help="republish the recorded topics with /clock (Ctrl-C stops)")
+    r.add_argument("--rate", type=float, default=1.0, help="with --publish: speed factor, 0 = as fast as possible")
     r.set_defaults(func=cmd_replay)
-    be = sub.add_parser("bench", help="speed against error on hard scenes, side by side with peer methods")
-    be.add_argument("--quick", action="store_true", help="two scenes, few settings (under a minute)")
+    o = command("outputs")
+    o.set_defaults(func=cmd_outputs)
+    be = command("bench", "Maintainers regenerate the committed report with --out docs/benchmarks.md --plots "
+                          "docs/bench (README.md, Maintainers).")
+    be.add_argument("--quick", action="store_true", help="two scenes, few settings (seconds)")
     be.add_argument("--scale", action="store_true", help="cost against the number of berries, N = 2 … 300 "
                                                           "(rewrites only its own section of the report)")
-    be.add_argument("--out", default="docs/benchmarks.md", help="the Markdown report to write")
-    be.add_argument("--plots", default="docs/bench", help="directory for one work–precision plot per scene")
+    be.add_argument("--out", default="out/bench/benchmarks.md", metavar="FILE", help="the Markdown report to write")
+    be.add_argument("--plots", default="out/bench", metavar="DIR",
+                    help="directory for one work–precision plot per scene and rows.json")
     be.set_defaults(func=cmd_bench)
-    c = sub.add_parser("cluster", help="generate a cluster scene (seeded) or a planar row of berries")
-    c.add_argument("-o", "--output", required=True, help="the scene TOML to write")
-    c.add_argument("--berries", type=int, default=60, help="number of berries (default 60)")
-    c.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
-    c.add_argument("--row", action="store_true", help="a planar row on one rod (Newton's cradle) instead")
-    c.add_argument("--pitch", type=float, help="--row: hinge spacing in m (default 0.027, touching at rest)")
-    c.add_argument("--precompression", type=float, default=0.0, help="largest overlap of two berries at rest, m")
-    for name, unit in (("diameter", "m"), ("twig_length", "m"), ("hinge_stiffness", "N·m/rad"),
-                       ("hinge_damping", "N·m·s/rad")):
-        c.add_argument(f"--{name.replace('_', '-')}", type=float, nargs=2, metavar=("MEAN", "SD"),
-                       help=f"normal distribution of the {name.replace('_', ' ')}, {unit}")
-    c.set_defaults(func=cmd_cluster)
-    w = sub.add_parser("sweep", help="run a grid or Monte Carlo sweep over scene parameters to Parquet (resumable)")
-    w.add_argument("spec", help="sweep spec TOML (docs/sweeps.md)")
-    w.add_argument("-o", "--output", help="the Parquet file (default: the spec's name with .parquet)")
-    w.add_argument("--workers", type=int, help="local worker processes (default: one per core)")
-    w.add_argument("--scheduler", help="a Dask distributed scheduler address, tcp://host:port, instead")
-    w.set_defaults(func=cmd_sweep)
-    o = sub.add_parser("outputs", help="list every output channel (name, unit, ROS topic, FMU causality) as Markdown")
-    o.set_defaults(func=cmd_outputs)
-    p = sub.add_parser("paper", help="reproduce tests 1–9 of Xu et al. (2025) and check each claim")
-    p.add_argument("--out", default="out/paper", help="directory for figures and the claims report")
-    p.set_defaults(func=cmd_paper)
     return ap
 
 
@@ -358,9 +452,18 @@ def _stamp(path: str) -> tuple | None:
     return st.st_ino, st.st_mtime_ns, st.st_size
 
 
+def _targets(a: argparse.Namespace) -> list[str]:
+    """The paths the command writes (an option given several times, as simulate --out, gives several)."""
+    out = []
+    for k in TARGETS.get(a.command, ()):
+        v = getattr(a, k, None)
+        out += [str(p) for p in (v if isinstance(v, list) else [v]) if p]
+    return out
+
+
 def _interrupted(a: argparse.Namespace, before: dict[str, tuple | None]) -> str:
     """What an interruption leaves: every file target not replaced since the start is untouched."""
-    paths = [str(getattr(a, k)) for k in TARGETS.get(a.command, ()) if getattr(a, k, None)]
+    paths = _targets(a)
     files = [p for p in paths if not os.path.isdir(p) and _stamp(p) == before.get(p)]
     dirs = [p for p in paths if os.path.isdir(p)]
     said = "interrupted"
@@ -374,7 +477,7 @@ def _interrupted(a: argparse.Namespace, before: dict[str, tuple | None]) -> str:
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
     cmd = f"grapefmu {a.command}"
-    before = {str(getattr(a, k)): _stamp(str(getattr(a, k))) for k in TARGETS.get(a.command, ()) if getattr(a, k, None)}
+    before = {p: _stamp(p) for p in _targets(a)}
     handlers = {}
     if threading.current_thread() is threading.main_thread():
         handlers = {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
@@ -389,7 +492,8 @@ def main(argv: list[str] | None = None) -> int:
             return code
         except KeyboardInterrupt as e:
             signum = getattr(e, "signum", signal.SIGINT)
-            print(f"{_newline()}{cmd}: {_interrupted(a, before)}", file=sys.stderr)
+            note = getattr(e, "note", None)
+            print(f"{_newline()}{cmd}: {_interrupted(a, before)}{'; ' + note if note else ''}", file=sys.stderr)
             return 128 + signum
     finally:
         for sig, h in handlers.items():

@@ -1,5 +1,6 @@
 """Run every method on every scene, measure error against a reference that two independent solvers
-agree on, and write docs/benchmarks.md with one work–precision plot per scene.
+agree on, and write a Markdown report with one work–precision plot per scene (out/bench unless told; the
+committed docs/benchmarks.md and docs/bench are regenerated with --out docs/benchmarks.md --plots docs/bench).
 
 Protocol (issue 5): reference = grapefmu at rtol 1e-13 checked against scipy DOP853 with events at 1e-13
 (must agree to 1e-10 rad, or the scene is refused); error = largest angle error on the 1 ms grid, final
@@ -273,8 +274,8 @@ def main(quick: bool, out: Path, plot_dir: Path) -> int:
         tmp.write_text(text)
     scale = plot_dir / "scale.md"
     if scale.exists() and not quick:  # keep the scale section (grapefmu bench --scale) in the report
-        from .scale import insert_section
-        insert_section(out, scale.read_text())
+        from .scale import in_report, insert_section
+        insert_section(out, in_report(scale.read_text(), plot_dir, out))
     print(text)
     print(f"wrote {out} and {len(files)} plots in {plot_dir} ({time.perf_counter() - t0:.0f} s)")
     return 0

@@ -3,12 +3,13 @@
 `grapefmu bench --scale` times the planar row and the spherical cluster under the default
 pick-and-place move for N = 2 … 300 at rtol 1e-6, with the pair counts that explain the cost,
 measures event location against step-size control for a smooth contact law in a dense cluster,
-and the broad phase's skin; it writes docs/bench/scale.md, docs/bench/scale.png and the section
-of docs/benchmarks.md between the scale markers.
+and the broad phase's skin; it writes scale.md and scale.png in the plot folder (out/bench unless told;
+docs/bench for the committed report) and the section of the report between the scale markers.
 """
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 from dataclasses import replace
@@ -195,13 +196,19 @@ def main(out: Path, plot_dir: Path) -> int:
     plot_dir.mkdir(parents=True, exist_ok=True)
     png = plot_dir / "scale.png"
     plot(data, png)
-    section = markdown(data, str(Path(png).relative_to(out.parent)) if png.is_relative_to(out.parent) else str(png))
+    section = markdown(data, png.name)  # scale.md sits beside its plot
     with atomic_path(plot_dir / "scale.md") as tmp:
         tmp.write_text(section)
+    section = in_report(section, plot_dir, out)
     insert_section(out, section)
     print(section)
     print(f"wrote {out}, {png} ({time.perf_counter() - t0:.0f} s)")
     return 0
+
+
+def in_report(section: str, plot_dir: Path, out: Path) -> str:
+    """scale.md's section with its plot linked from the report's folder instead of its own."""
+    return section.replace("](scale.png)", f"]({os.path.relpath(plot_dir / 'scale.png', out.parent)})")
 
 
 def insert_section(path: Path, section: str) -> None:

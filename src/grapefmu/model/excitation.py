@@ -32,11 +32,29 @@ class ExcitationArrays(NamedTuple):
 
 @dataclass(frozen=True)
 class Excitation:
-    """A validated excitation. `kind` is the scene's name for it; `arrays` is its compiled form."""
+    """A validated excitation. `kind` is the scene's name for it; `arrays` is its compiled form. `defined_until`:
+    the time after which the scene does not say what the gripper does (a CSV's last row, without `after`);
+    a run past it is refused (check_covers)."""
 
     kind: str
     arrays: ExcitationArrays
     description: str = ""
+    defined_until: float = math.inf
+    key: str = "excitation"   # the scene key to name when a run goes past defined_until
+
+
+#: what a CSV excitation does after its last row (the scene's `after`): keep the last row's acceleration, or zero
+AFTER = ("hold", "zero")
+#: the time of the row that carries a held last value on "forever" (beyond any run's t_end)
+FOREVER = 1e9
+
+
+def check_covers(ex: Excitation, t_end: float, t_key: str) -> None:
+    """Refuse a run to t_end (named by t_key) past the end of a table the scene gives no `after` for."""
+    if t_end > ex.defined_until * (1 + 1e-12) + 1e-12:
+        raise SceneError(ex.key, f"the CSV ends at {ex.defined_until:g} s, before the run's end {t_end:g} s "
+                                 f"({t_key}); say what follows its last row with after = \"hold\" (keep its "
+                                 f"acceleration) or after = \"zero\" in [excitation], or extend the file")
 
 
 def constant(ax: float = 0.0, az: float = 0.0) -> Excitation:
@@ -113,9 +131,11 @@ def pick_and_place(moves: list[tuple[tuple[float, float], float]], start: float 
     return table("pick-and-place", np.array(rows), desc)
 
 
-def read_csv(path: Path, key: str, hold: bool = False) -> Excitation:
+def read_csv(path: Path, key: str, hold: bool = False, after: str | None = None) -> Excitation:
     """A CSV of time, ax, az (header row allowed); linear in between (or held from each row to the
-    next with hold = true, as a sampled controller output is), zero outside."""
+    next with hold = true, as a sampled controller output is), zero before the first row. After the last
+    row: its acceleration kept (after = "hold"), zero (after = "zero"), or, without `after`, undefined: a run
+    that goes past it is refused (check_covers)."""
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             raw = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
@@ -142,7 +162,12 @@ def read_csv(path: Path, key: str, hold: bool = False) -> Excitation:
         raise SceneError(key, f"{path}: time must start at or after 0 s")
     if hold:
         arr = zero_order_hold(arr)
-    return table("csv", arr, f"csv: {path.name}, {len(rows)} rows{' (held)' if hold else ''}")
+    last = float(arr[-1, 0])
+    if after == "hold":
+        arr = np.vstack([arr, [max(FOREVER, 2 * last), *arr[-1, 1:]]])
+    desc = f"csv: {path.name}, {len(rows)} rows{' (held)' if hold else ''}" + (f", then {after}" if after else "")
+    ex = table("csv", arr, desc)
+    return Excitation(ex.kind, ex.arrays, ex.description, math.inf if after else last, key)
 
 
 def zero_order_hold(rows: np.ndarray) -> np.ndarray:

@@ -19,23 +19,40 @@ def run_metadata(run: Run) -> dict[str, str]:
     s = run.scene.solver
     return {"grapefmu_version": __version__, "scene_name": run.scene.name, "scene_toml": run.scene.source,
             "method": str(run.stats.get("method", s.method)), "input_source": "scene",
+            "namespace": messages.NAMESPACE,
             "solver": json.dumps({"rtol": run.stats.get("rtol", s.rtol), "atol": run.stats.get("atol", s.atol),
                                   "t_end": float(run.t[-1]), "output_interval": s.output_interval})}
 
 
+#: markers and /tf in a simulate recording, Hz (a 3D panel needs far fewer than the state topics' samples)
+MARKER_RATE = 30.0
+TF_RATE = 100.0
+
+
 def write_mcap(run: Run, path: str | Path, *, chunk_size: int = 1 << 20) -> None:
-    """`chunk_size`: uncompressed bytes per chunk (a torn file reads back up to its last complete chunk)."""
+    """`chunk_size`: uncompressed bytes per chunk (a torn file reads back up to its last complete chunk).
+    Topics are named as the node under its default namespace publishes them, with /tf, /tf_static,
+    robot_description, markers and /clock, so a 3D panel shows the run as it would the live node."""
     model = run.scene.model
     snap = run.snapshot()
     summary = messages.summary_table(snap)
     timed = []  # (ns, order, topic, message): state topics first at each stamp, impacts last
+    t0 = to_ns(float(run.t[0]))
+    timed += [(t0, 0, topic, m) for topic, m in messages.tf_static(model, t0)]
+    last_marker = last_tf = -float("inf")
     for k, t in enumerate(run.t):
         ns = to_ns(float(t))
+        markers = t - last_marker >= 1.0 / MARKER_RATE - 1e-12
+        last_marker = t if markers else last_marker
+        tf = t - last_tf >= 1.0 / TF_RATE - 1e-12
+        last_tf = t if tf else last_tf
+        timed.append((ns, 0, *messages.clock(ns)))
         timed.append((ns, 0, *messages.accel(ns, run.accel[k])))
-        timed += [(ns, 1, topic, m) for topic, m in messages.state_messages(model, snap, k, ns, summary)]
-    timed += [(ns, 2, topic, m) for ns, topic, m in messages.impact_messages(run.impacts)]
+        timed += [(ns, 1, topic, m) for topic, m in messages.state_messages(model, snap, k, ns, summary,
+                                                                            markers=markers, tf=tf)]
+    timed += [(ns, 2, topic, m) for ns, topic, m in messages.impact_messages(model, run.impacts)]
     timed.sort(key=lambda x: (x[0], x[1]))
     with atomic_path(path) as tmp, McapWriter(tmp, chunk_size=chunk_size) as wr:
         wr.add_metadata("grapefmu", run_metadata(run))
         for ns, _, topic, m in timed:
-            wr.write(topic, m, ns)
+            wr.write(messages.absolute(topic), m, ns)

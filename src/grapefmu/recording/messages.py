@@ -2,17 +2,19 @@
 
 `state_messages` turns one sample of a `Snapshot` into the messages of every state topic; the MCAP
 writer calls it for every sample of a run and the ROS node for every state it reaches, and both
-serialize through the one typestore (typestore.py). Topics (relative names; frame `rachis`, REP-103:
-x along the rod, y left, z up; docs/ros.md):
+serialize through the one typestore (typestore.py). Topics (relative to the node's namespace,
+/grape_cluster by default; frames in frames.py, REP-103: x along the rod, y left, z up; docs/ros.md):
 
   joint_states               sensor_msgs/JointState       twig_<angle>: angle, angular velocity, hinge torque
   pedicel_tension            sensor_msgs/JointState       twig_<berry>: pedicel tension in effort, N
   contact/<a>_<b>/wrench     geometry_msgs/WrenchStamped  force on berry b from berry a, N (up to PER_PAIR_LIMIT pairs)
-  contacts                   std_msgs/Float64MultiArray   pair, force, penetration of each pair in contact
+  contacts                   grapefmu_msgs/Contacts       both bodies, point, normal, depth and force of each contact
   summary                    std_msgs/Float64MultiArray   time and the catalogue's summary channels
-  collision_events           std_msgs/Float64MultiArray   one message per finished impact
+  collision_events           grapefmu_msgs/CollisionEvent one message per finished impact
   rachis/accel               geometry_msgs/AccelStamped   the rachis acceleration (a_x, a_z) in linear.x, linear.z
   markers                    visualization_msgs/MarkerArray  rachis, twigs, berries and contact forces, frame `world`
+  /tf, /tf_static            tf2_msgs/TFMessage           world → rachis → berries and hinges (frames.py)
+  robot_description          std_msgs/String              URDF of the cluster, consistent with /tf
 """
 from __future__ import annotations
 
@@ -21,24 +23,26 @@ import numpy as np
 from ..model.model import Model
 from ..results import catalogue
 from ..results.impacts import Impacts
+from . import frames
 from .stamps import to_ns
-from .typestore import header, msg
+from .typestore import header, msg, stamp
 
-FRAME = "rachis"
-WORLD = "world"
-CONTACT_FIELDS = ("pair", "contact_force", "penetration")
-IMPACT_FIELDS = ("pair", "onset", "end", "approach_speed", "separation_speed", "peak_force", "peak_time", "impulse",
-                 "dissipated", "bruising")
+FRAME = frames.rachis()
+WORLD = frames.WORLD
+#: the node's default namespace; recordings name topics absolutely under it, as rosbag2 does
+NAMESPACE = "/grape_cluster"
 #: the summary topic's fields, in order
 SUMMARY_FIELDS = ("time", *(c.name for c in catalogue.on_topic("summary")))
 #: the type of every topic this module builds
 TOPIC_TYPES = {
     "joint_states": "sensor_msgs/msg/JointState", "pedicel_tension": "sensor_msgs/msg/JointState",
-    "contacts": "std_msgs/msg/Float64MultiArray", "summary": "std_msgs/msg/Float64MultiArray",
-    "collision_events": "std_msgs/msg/Float64MultiArray", "rachis/accel": "geometry_msgs/msg/AccelStamped",
+    "contacts": "grapefmu_msgs/msg/Contacts", "summary": "std_msgs/msg/Float64MultiArray",
+    "collision_events": "grapefmu_msgs/msg/CollisionEvent", "rachis/accel": "geometry_msgs/msg/AccelStamped",
     "rachis/accel_applied": "geometry_msgs/msg/AccelStamped", "markers": "visualization_msgs/msg/MarkerArray",
     "/clock": "rosgraph_msgs/msg/Clock", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
-    "rachis/pose": "geometry_msgs/msg/PoseStamped",
+    "rachis/pose": "geometry_msgs/msg/PoseStamped", "/tf": "tf2_msgs/msg/TFMessage",
+    "/tf_static": "tf2_msgs/msg/TFMessage", "robot_description": "std_msgs/msg/String",
+    "sim_time": "rosgraph_msgs/msg/Clock",
 }
 WRENCH = "geometry_msgs/msg/WrenchStamped"
 
@@ -54,6 +58,30 @@ def topic_type(topic: str) -> str:
     return WRENCH if topic.endswith("/wrench") else TOPIC_TYPES[topic]
 
 
+def absolute(topic: str, namespace: str = NAMESPACE) -> str:
+    """The full name of a topic of this module under `namespace` (global names like /tf stay as they are)."""
+    return topic if topic.startswith("/") else f"{namespace.rstrip('/')}/{topic}"
+
+
+def relative(topic: str, namespace: str = NAMESPACE) -> str:
+    """The inverse of absolute (a recording made before topics were namespaced has them relative already)."""
+    head = namespace.rstrip("/") + "/"
+    return topic[len(head):] if head != "/" and topic.startswith(head) else topic
+
+
+def _transform(ns: int, parent: str, child: str, xyz, q):
+    return msg("geometry_msgs/msg/TransformStamped", header=header(ns, parent), child_frame_id=child,
+               transform={"translation": {"x": float(xyz[0]), "y": float(xyz[1]), "z": float(xyz[2])},
+                          "rotation": {"x": float(q[0]), "y": float(q[1]), "z": float(q[2]), "w": float(q[3])}})
+
+
+def tf_static(model: Model, ns: int, prefix: str = frames.PREFIX):
+    """("/tf_static", message) of the transforms that never change, and ("robot_description", URDF)."""
+    return [("/tf_static", msg("tf2_msgs/msg/TFMessage", transforms=[
+                _transform(ns, *t) for t in frames.static_transforms(model, prefix)])),
+            ("robot_description", msg("std_msgs/msg/String", data=frames.urdf(model, prefix)))]
+
+
 def labelled(labels, values, rows: int = 1):
     """Float64MultiArray of `rows` rows of len(labels) fields, the field names in the dimension label."""
     return msg("std_msgs/msg/Float64MultiArray", layout={"dim": [{"label": ",".join(labels), "size": rows,
@@ -61,8 +89,8 @@ def labelled(labels, values, rows: int = 1):
                data=np.asarray(values, dtype=float).reshape(-1))
 
 
-def accel(ns: int, a, topic: str = "rachis/accel"):
-    return topic, msg("geometry_msgs/msg/AccelStamped", header=header(ns, FRAME),
+def accel(ns: int, a, topic: str = "rachis/accel", prefix: str = frames.PREFIX):
+    return topic, msg("geometry_msgs/msg/AccelStamped", header=header(ns, frames.rachis(prefix)),
                       accel={"linear": {"x": float(a[0]), "y": 0.0, "z": float(a[1])}})
 
 
@@ -76,34 +104,58 @@ def summary_table(snap: catalogue.Snapshot) -> np.ndarray:
 
 
 def state_messages(model: Model, snap: catalogue.Snapshot, k: int, ns: int, summary: np.ndarray, *,
-                   markers: bool = False) -> list:
-    """(topic, message) of every state topic at sample k of snap, stamped ns; `summary` is summary_table(snap)."""
+                   markers: bool = False, tf: bool = True, prefix: str = frames.PREFIX) -> list:
+    """(topic, message) of every state topic at sample k of snap, stamped ns; `summary` is summary_table(snap).
+    Markers and /tf only when asked: a 3D view needs far fewer of them than the state topics' rate."""
     obs = snap.observation
     dof_joints = [f"twig_{n}" for n in model.dof_names]
-    out = [("joint_states", msg("sensor_msgs/msg/JointState", header=header(ns, FRAME), name=dof_joints,
+    out = [("joint_states", msg("sensor_msgs/msg/JointState", header=header(ns, frames.rachis(prefix)), name=dof_joints,
                                 position=snap.angles[k], velocity=snap.angular_velocities[k],
                                 effort=obs.hinge_torque[k])),
-           ("pedicel_tension", msg("sensor_msgs/msg/JointState", header=header(ns, FRAME),
+           ("pedicel_tension", msg("sensor_msgs/msg/JointState", header=header(ns, frames.rachis(prefix)),
                                    name=[f"twig_{n}" for n in model.names], effort=obs.pedicel_tension[k]))]
     force, normal = obs.contact_force[k], obs.contact_normal[k]
     for p, topic in enumerate(wrench_topics(model)):
         f = force[p] * normal[p]
-        out.append((topic, msg(WRENCH, header=header(ns, FRAME),
+        out.append((topic, msg(WRENCH, header=header(ns, frames.rachis(prefix)),
                                wrench={"force": {"x": f[0], "y": f[1], "z": f[2]}})))
-    touching = np.flatnonzero(snap.in_contact[k])
-    out.append(("contacts", labelled(CONTACT_FIELDS, np.column_stack(
-        [touching, force[touching], obs.penetration[k, touching]]), rows=len(touching))))
+    out.append(("contacts", msg("grapefmu_msgs/msg/Contacts", header=header(ns, frames.rachis(prefix)),
+                                contacts=contacts(model, obs, k, np.flatnonzero(snap.in_contact[k])))))
     out.append(("summary", labelled(SUMMARY_FIELDS, summary[k])))
+    if tf:
+        out.append(("/tf", msg("tf2_msgs/msg/TFMessage", transforms=[
+            _transform(ns, *t) for t in frames.transforms(model, snap, k, prefix)])))
     if markers:
         out.append(("markers", marker_array(model, snap, k, ns)))
     return out
 
 
-def impact_messages(impacts: Impacts) -> list:
-    """(end time in ns, "collision_events", message) of every impact, fields named in IMPACT_FIELDS."""
-    rec = impacts.records()
-    return [(to_ns(float(r["end"])), "collision_events",
-             labelled(IMPACT_FIELDS, [float(r[f]) for f in IMPACT_FIELDS])) for r in rec]
+def contacts(model: Model, obs, k: int, touching) -> list:
+    """grapefmu_msgs/Contact of each pair in `touching` at sample k: the point midway through the overlap."""
+    out = []
+    for p in touching:
+        pr = model.pairs[p]
+        n, depth = obs.contact_normal[k, p], float(obs.penetration[k, p])
+        point = obs.position[k, pr.i] + (model.berries[pr.i].radius - 0.5 * depth) * n
+        out.append(msg("grapefmu_msgs/msg/Contact", body_a=model.names[pr.i], body_b=model.names[pr.j],
+                       position={"x": point[0], "y": point[1], "z": point[2]},
+                       normal={"x": n[0], "y": n[1], "z": n[2]}, depth=depth, force=float(obs.contact_force[k, p])))
+    return out
+
+
+def impact_messages(model: Model, impacts: Impacts, origin: int = 0, prefix: str = frames.PREFIX) -> list:
+    """(end stamp in ns, "collision_events", message) of every impact; stamps are `origin` + simulated time."""
+    out = []
+    for r in impacts.records():
+        pr = model.pairs[int(r["pair"])]
+        end = origin + to_ns(float(r["end"]))
+        out.append((end, "collision_events", msg(
+            "grapefmu_msgs/msg/CollisionEvent", header=header(end, frames.rachis(prefix)),
+            body_a=model.names[pr.i], body_b=model.names[pr.j], onset=stamp(origin + to_ns(float(r["onset"]))),
+            peak_time=stamp(origin + to_ns(float(r["peak_time"]))), approach_speed=float(r["approach_speed"]),
+            separation_speed=float(r["separation_speed"]), peak_force=float(r["peak_force"]),
+            impulse=float(r["impulse"]), dissipated_energy=float(r["dissipated"]), bruising=bool(r["bruising"]))))
+    return out
 
 
 def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_scale: float = 0.02):

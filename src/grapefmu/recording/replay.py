@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import GrapefmuError, RecordingError
 from ..scenefile import parse_scene
+from .messages import NAMESPACE, relative
 from .stamps import seconds, stamp_seconds, to_ns
 
 
@@ -143,8 +144,9 @@ def _scan(path: Path, fh, size: int, rec: Recording, topics: set[str] | None) ->
                                    f"does not decode as {typename} ({type(e).__name__}: {e})") from None
         counts["messages"] += 1
         counts["last"] = max(counts["last"], r.log_time)
-        if topics is None or ch.topic in topics:
-            rec.topics.setdefault(ch.topic, []).append((r.log_time, decoded))
+        name = relative(ch.topic, rec.metadata.get("namespace", NAMESPACE))  # recorded under the node's namespace
+        if topics is None or name in topics:
+            rec.topics.setdefault(name, []).append((r.log_time, decoded))
             rec.count += 1
 
     def inner(r, where: str) -> None:
@@ -271,7 +273,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
     complete chunk; a corrupted one raises CorruptRecording; `CheckResult.ok` says whether every deviation
     is within `tolerance`."""
     path = Path(path)
-    rec = read_recording(path, {"joint_states", "rachis/accel_applied"})
+    rec = read_recording(path, {"joint_states", "rachis/accel_applied", "sim_time"})
     scene, solver_cfg = _settings(path, rec)
     n_dof = scene.model.n_dof
     recorded = {}
@@ -280,7 +282,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         if q.shape != (n_dof,) or w.shape != (n_dof,):
             raise RecordingError(f"{path}: joint_states logged at {_t(ns)} has {q.size} positions and {w.size} "
                                  f"velocities, the recorded scene has {n_dof} angles")
-        recorded[stamp_seconds(m.header.stamp.sec, m.header.stamp.nanosec)] = (q, w)
+        recorded[ns] = (q, w)  # by the time it was logged at (the header's stamp, ns)
     if not recorded:
         raise RecordingError(f"{path}: no joint_states to compare")
     source = rec.metadata.get("input_source", "scene")
@@ -294,7 +296,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         a, b = _deviation(angles, q), _deviation(rates, w)
         dq, dw = max(dq, a), max(dw, b)
         if max(a, b) > worst:
-            worst, worst_t = max(a, b), t
+            worst, worst_t = max(a, b), seconds(t)
         n += 1
 
     if source == "scene":
@@ -303,19 +305,23 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
                        atol=solver_cfg.get("atol"), output_interval=solver_cfg.get("output_interval"),
                        cross_check=False)
         for k, t in enumerate(run.t):
-            key = seconds(to_ns(t))
+            key = to_ns(t)
             if key in recorded:
                 compare(key, run.angles[k], run.angular_velocities[k])
     else:
         from ..solver.solver import Solver
         solver = Solver(scene)
-        for _, m in rec.topics.get("rachis/accel_applied", []):
-            t_end = stamp_seconds(m.header.stamp.sec, m.header.stamp.nanosec)
+        applied = rec.topics.get("rachis/accel_applied", [])
+        # each applied interval ends at a simulated time: `sim_time`, logged at the same stamp (its header is
+        # the ROS clock), or the stamp itself in recordings made before the node stamped with its clock
+        sim = {ns: to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec)) for ns, m in rec.topics.get("sim_time", [])}
+        for ns, m in applied:
+            t_end = seconds(sim.get(ns, ns))
             if t_end < solver.t:  # the node was reset
                 solver = Solver(scene)
             solver.advance(t_end - solver.t, (m.accel.linear.x, m.accel.linear.z))
-            if t_end in recorded:
-                compare(t_end, solver.angles, solver.angular_velocities)
+            if ns in recorded:
+                compare(ns, solver.angles, solver.angular_velocities)
     if n == 0:
         raise RecordingError(f"{path}: no recorded joint state matches a re-simulated time")
     return CheckResult(n, dq, dw, source, rec.truncated, worst_t, tolerance)

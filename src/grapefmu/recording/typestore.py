@@ -10,25 +10,32 @@ from __future__ import annotations
 
 import operator
 import os
+from pathlib import Path
 from functools import cache
 from typing import IO, Any, Mapping
 
 import numpy as np
 from mcap.writer import CompressionType, Writer
 from rosbags.interfaces import Nodetype
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from .. import __version__
 from ..errors import RecordingError
 from .stamps import split
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+#: grapefmu's own messages (contacts, collision events): these .msg files are the one definition, read here
+#: and built for rclpy by rosidl as the grapefmu_msgs package (ros_node/interfaces/grapefmu_msgs)
+MSG_DIR = Path(__file__).parent / "msg"
+TYPESTORE.register({k: v for f in sorted(MSG_DIR.glob("*.msg"))
+                    for k, v in get_types_from_msg(f.read_text(encoding="utf-8"), f"grapefmu_msgs/msg/{f.stem}").items()})
 
 # rosbags keeps numeric arrays as numpy arrays and writes their raw memory as they are. A list fails, and an
 # array with the wrong dtype or byte order gives wrong values without any error, so `msg` converts them.
 _DTYPES = {"bool": "bool", "byte": "uint8", "char": "uint8", "octet": "uint8"}
 
 
+@cache
 def _dtype(desc) -> np.dtype | None:
     """numpy dtype (little endian) of an array/sequence field descriptor of a numeric base type, else None."""
     sub = desc[1][0]
@@ -54,7 +61,7 @@ def _coerce(desc, value) -> Any:
     """Accept plain Python values: dicts for sub-messages, any sequence, array or bytes for numeric arrays."""
     kind, detail = desc
     if kind == Nodetype.NAME:
-        return msg(detail, **value) if isinstance(value, Mapping) else value
+        return msg(detail, **value) if isinstance(value, dict) else value
     if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
         if (dt := _dtype(desc)) is None:
             return [_coerce(detail[0], v) for v in value]
@@ -66,11 +73,17 @@ def _coerce(desc, value) -> Any:
         float(value) if "float" in name else operator.index(value)
 
 
+@cache
+def _fields(typename: str):
+    fdefs = TYPESTORE.fielddefs[typename][1]
+    return fdefs, frozenset(name for name, _ in fdefs)
+
+
 def msg(typename: str, **fields) -> Any:
     """A `typename` message (e.g. "sensor_msgs/msg/JointState") from TYPESTORE. Omitted fields get their ROS
     default, because rosbags' dataclasses have no defaults. Sub-messages may be given as dicts."""
-    fdefs = TYPESTORE.fielddefs[typename][1]
-    if unknown := fields.keys() - {name for name, _ in fdefs}:
+    fdefs, names = _fields(typename)
+    if unknown := fields.keys() - names:
         raise RecordingError(f"{typename} has no field(s) {sorted(unknown)}")
     return TYPESTORE.types[typename](**{name: _coerce(desc, fields[name]) if name in fields else _default(desc)
                                         for name, desc in fdefs})

@@ -7,6 +7,7 @@ recordings, a run's columns (CSV, Parquet) and its summary are all generated fro
 """
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -57,8 +58,27 @@ class Channel:
         return [""]
 
     def column(self, element: str) -> str:
-        """The one name of this channel's element everywhere (FMU variable, CSV column, plot label)."""
+        """The one name of this channel's element everywhere (FMU variable, ROS field, plot label); a file's
+        column adds the unit (file_column)."""
         return f"{self.name}_{element}" if element else self.name
+
+    def file_column(self, element: str) -> str:
+        """This channel's element as a CSV or Parquet column: its name with its unit (`angle_left_rad`)."""
+        return file_column(self.column(element), self.unit)
+
+
+def unit_suffix(unit: str) -> str:
+    """A unit as a name suffix: lower case, every other character run as one "_" (N -> n, rad/s -> rad_s,
+    N.m -> n_m, m/s2 -> m_s2); "" for a count or a flag."""
+    return re.sub(r"[^a-z0-9]+", "_", unit.lower()).strip("_")
+
+
+def file_column(column: str, unit: str) -> str:
+    """The one rule for a column name in a file (CSV, Parquet) or a summary key: the name, then its unit as a
+    suffix (`angle_left_rad`, `contact_force_left_right_n`, `energy_kinetic_j`, `time_s`); a count or a flag
+    (unit "") keeps its bare name (`collision_count`, `in_contact_left_right`)."""
+    suffix = unit_suffix(unit)
+    return f"{column}_{suffix}" if suffix else column
 
 
 def world(s: Snapshot, points: np.ndarray) -> np.ndarray:
@@ -169,26 +189,30 @@ def on_topic(topic: str) -> list[Channel]:
 
 
 def table(snap: Snapshot, model: Model, pairs: list[int] | None = None,
-          only: list[Channel] | tuple[Channel, ...] = CHANNELS) -> dict[str, np.ndarray]:
-    """Channels (all unless told) as named columns of samples; per-pair channels for `pairs` only (default: all)."""
+          only: list[Channel] | tuple[Channel, ...] = CHANNELS, units: bool = False) -> dict[str, np.ndarray]:
+    """Channels (all unless told) as named columns of samples; per-pair channels for `pairs` only (default: all).
+    Named by Channel.column, or with `units` by Channel.file_column (what CSV and Parquet files carry)."""
     cols: dict[str, np.ndarray] = {}
     for c in only:
+        name = c.file_column if units else c.column
         v = np.asarray(c.value(snap))
         if c.per == "cluster":
-            cols[c.name] = v
+            cols[name("")] = v
             continue
         names = c.element_names(model)
         idx = range(len(names)) if c.per != "pair" or pairs is None else pairs
         for k in idx:
-            cols[c.column(names[k])] = v[:, k]
+            cols[name(names[k])] = v[:, k]
     return cols
 
 
 def markdown() -> str:
     """The catalogue as a Markdown table (docs/outputs.md; `grapefmu outputs`)."""
-    rows = ["| channel | unit | per | type | ROS topic | FMU | description |", "|---|---|---|---|---|---|---|"]
+    rows = ["| channel | unit | CSV / Parquet column | per | type | ROS topic | FMU | description |",
+            "|---|---|---|---|---|---|---|---|"]
     for c in CHANNELS:
         fmu = c.fmi_causality if c.fmu else "—"
-        rows.append(f"| `{c.name}` | {c.unit or '—'} | {c.per} | {c.type} | {c.topic or '—'} | {fmu} | "
+        column = c.file_column("" if c.per == "cluster" else f"<{c.per}>")
+        rows.append(f"| `{c.name}` | {c.unit or '—'} | `{column}` | {c.per} | {c.type} | {c.topic or '—'} | {fmu} | "
                     f"{c.description} |")
     return "\n".join(rows) + "\n"

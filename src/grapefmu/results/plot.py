@@ -29,11 +29,37 @@ def _pyplot():
 LINES_LIMIT = 8
 
 
+def _legend(ax, **kw) -> None:
+    """The legend beside the panel, never over its curves or threshold lines."""
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, fontsize=8, **kw)
+
+
 def plot_run(run: Run, path: str | Path, title: str | None = None) -> None:
+    """The run's figure (`figure`) written to a .png, .pdf or .svg."""
     if Path(path).suffix.lower() not in PLOT_TYPES:
         raise GrapefmuError(f"{path}: unknown figure type {Path(path).suffix!r}; use {one_of(PLOT_TYPES)}")
-    if run.scene.model.n_berries > LINES_LIMIT:
-        return plot_cluster(run, path, title)
+    plt = _pyplot()
+    fig = figure(run, title)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=Path(path).suffix.lstrip(".").lower())
+    plt.close(fig)
+
+
+def figure(run: Run, title: str | None = None):
+    """The run as a matplotlib figure: one line per berry and pair, or for a cluster (more than LINES_LIMIT
+    berries) envelopes and counts. Quantities in the units of the files, except the angle axis (degrees, so
+    labelled)."""
+    fig = (_cluster_figure if run.scene.model.n_berries > LINES_LIMIT else _lines_figure)(run)
+    s = run.summary()
+    err = run.ledger_error()
+    fig.suptitle(title or f"{run.scene.name}: {s['berries']} berries, {s['collision_count']} impacts, peak contact "
+                 f"{s['peak_contact_force_n']:.3g} N, peak pedicel {s['peak_pedicel_tension_n']:.3g} N, "
+                 + ("ledger not meaningful (no energy moved)" if np.isnan(err) else f"ledger error {err:.1e}"),
+                 fontsize=10)
+    return fig
+
+
+def _lines_figure(run: Run):
     plt = _pyplot()
     m = run.scene.model
     th = run.scene.thresholds
@@ -41,51 +67,38 @@ def plot_run(run: Run, path: str | Path, title: str | None = None) -> None:
     t = run.t
     for i, name in enumerate(m.names):
         ax[0].plot(t, np.degrees(run.angles[:, i]), label=name)
-    ax[0].set_ylabel("twig angle (deg)")
-    ax[0].legend(loc="upper right", fontsize=8)
+    ax[0].set_ylabel("twig angle (deg; files: rad)")
+    _legend(ax[0])
     for p in range(len(m.pairs)):
         ax[1].plot(t, run.contact_force[:, p], label=m.pair_name(p))
     for k, onset in enumerate(run.impacts.onset):
         ax[1].axvline(onset, color="0.85", lw=0.6, zorder=0)
     ax[1].axhline(th.bruise_force, color="r", ls="--", lw=0.8, label=f"bruise {th.bruise_force:g} N")
     ax[1].set_ylabel("contact force (N)")
-    ax[1].legend(loc="upper right", fontsize=8)
+    _legend(ax[1])
     for i, name in enumerate(m.names):
         ax[2].plot(t, run.pedicel_tension[:, i], label=name)
     ax[2].axhline(th.detachment_force, color="r", ls="--", lw=0.8, label=f"detachment {th.detachment_force:g} N")
     ax[2].set_ylabel("pedicel tension (N)")
-    ax[2].legend(loc="upper right", fontsize=8)
+    _legend(ax[2])
     e = run.energy
     for k in ("kinetic", "gravity", "hinge_elastic", "contact_elastic"):
-        ax[3].plot(t, e[k] * 1e3, label=k.replace("_", " "))
-    ax[3].plot(t, run.dissipated * 1e3,
-               label="dissipated", ls="--")
-    ax[3].plot(t, e["base_work"] * 1e3, label="work by base", ls=":")
-    ax[3].set_ylabel("energy (mJ)")
-    ax[3].legend(loc="upper right", fontsize=8, ncol=2)
+        ax[3].plot(t, e[k], label=k.replace("_", " "))
+    ax[3].plot(t, run.dissipated, label="dissipated", ls="--")
+    ax[3].plot(t, e["base_work"], label="work by base", ls=":")
+    ax[3].set_ylabel("energy (J)")
+    _legend(ax[3])
     ax[4].plot(t, run.accel[:, 0], label="ax")
     ax[4].plot(t, run.accel[:, 1], label="az")
     ax[4].set_ylabel("rachis accel (m/s²)")
     ax[4].set_xlabel("time (s)")
-    ax[4].legend(loc="upper right", fontsize=8)
-    _finish(plt, fig, run, path, title)
+    _legend(ax[4])
+    return fig
 
 
-def _finish(plt, fig, run: Run, path: str | Path, title: str | None) -> None:
-    s = run.summary()
-    err = run.ledger_error()
-    fig.suptitle(title or f"{run.scene.name}: {s['berries']} berries, {s['collision_count']} impacts, peak contact "
-                 f"{s['peak_contact_force']:.3g} N, peak pedicel {s['peak_pedicel_tension']:.3g} N, "
-                 + ("ledger not meaningful (no energy moved)" if np.isnan(err) else f"ledger error {err:.1e}"),
-                 fontsize=10)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format=Path(path).suffix.lstrip(".").lower())
-    plt.close(fig)
-
-
-def plot_cluster(run: Run, path: str | Path, title: str | None = None) -> None:
-    """A cluster: the berries at rest and at their largest swing, force and tension envelopes against
-    the thresholds, pairs in contact, energy per berry and the rachis input."""
+def _cluster_figure(run: Run):
+    """A cluster: the berries at rest and at their largest swing (coloured by pedicel tension, one scale), force
+    and tension envelopes against the thresholds, pairs in contact, energy per berry and the rachis input."""
     plt = _pyplot()
     th = run.scene.thresholds
     t = run.t
@@ -95,50 +108,53 @@ def plot_cluster(run: Run, path: str | Path, title: str | None = None) -> None:
     moved = np.linalg.norm(pos - pos[:1] - (pos.mean(axis=1, keepdims=True) - pos[:1].mean(axis=1, keepdims=True)),
                            axis=2).max(axis=1)
     k_max = int(np.argmax(moved))
+    shown = run.pedicel_tension[[0, k_max]]
+    lo, hi = float(shown.min()), float(shown.max())  # one colour scale for both panels
     for col, (k, label) in enumerate(((0, "t = 0"), (k_max, f"largest swing, t = {t[k_max]:.3f} s"))):
         ax = fig.add_subplot(grid[0, col], projection="3d")
         r = run.scene.model.arrays.berry["radius"]
-        ax.scatter(pos[k, :, 0], pos[k, :, 1], pos[k, :, 2], s=(r / r.max()) ** 2 * 60,
-                   c=run.pedicel_tension[k], cmap="viridis", depthshade=False)
-        ax.set_title(f"berries, {label} (colour: pedicel tension)", fontsize=9)
+        dots = ax.scatter(pos[k, :, 0], pos[k, :, 1], pos[k, :, 2], s=(r / r.max()) ** 2 * 60,
+                          c=run.pedicel_tension[k], cmap="viridis", vmin=lo, vmax=hi if hi > lo else lo + 1e-9,
+                          depthshade=False)
+        ax.set_title(f"berries, {label}", fontsize=9)
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.set_zlabel("z (m)")
+        fig.colorbar(dots, ax=ax, shrink=0.6, pad=0.1, label="pedicel tension (N)")
     ax = fig.add_subplot(grid[1, 0])
     ax.plot(t, run.contact_force.max(axis=1, initial=0.0), lw=0.8, label="largest contact force")
     ax.axhline(th.bruise_force, color="r", ls="--", lw=0.8, label=f"bruise {th.bruise_force:g} N")
     ax.set_ylabel("force (N)")
-    ax.legend(loc="upper right", fontsize=8)
+    _legend(ax)
     ax = fig.add_subplot(grid[1, 1])
     ax.plot(t, run.pedicel_tension.max(axis=1), lw=0.8, label="largest pedicel tension")
     ax.plot(t, np.median(run.pedicel_tension, axis=1), lw=0.8, label="median")
     ax.axhline(th.detachment_force, color="r", ls="--", lw=0.8, label=f"detachment {th.detachment_force:g} N")
     ax.set_ylabel("tension (N)")
-    ax.legend(loc="upper right", fontsize=8)
+    _legend(ax)
     ax = fig.add_subplot(grid[2, 0])
     ax.step(t, run.active_pairs, where="post", lw=0.8)
     ax.set_ylabel("pairs in contact")
     ax.set_title(f"{run.stats.get('candidate_pairs', len(run.scene.model.pairs))} candidate pairs; "
                  f"{run.stats.get('near_pairs_mean', float('nan')):.0f} near pairs per step on average", fontsize=9)
     ax = fig.add_subplot(grid[2, 1])
-    per_berry = run.dissipated_per_berry() * 1e3
+    per_berry = run.dissipated_per_berry()
     ax.bar(np.arange(len(per_berry)), np.sort(per_berry)[::-1], width=1.0)
-    ax.set_ylabel("dissipated per berry (mJ)")
+    ax.set_ylabel("dissipated per berry (J)")
     ax.set_xlabel("berries, most first")
     ax = fig.add_subplot(grid[3, 0])
     e = run.energy
     for k in ("kinetic", "gravity", "hinge_elastic", "contact_elastic"):
-        ax.plot(t, e[k] * 1e3, label=k.replace("_", " "))
-    ax.plot(t, run.dissipated * 1e3, ls="--",
-            label="dissipated")
-    ax.plot(t, e["base_work"] * 1e3, ls=":", label="work by base")
-    ax.set_ylabel("energy (mJ)")
+        ax.plot(t, e[k], label=k.replace("_", " "))
+    ax.plot(t, run.dissipated, ls="--", label="dissipated")
+    ax.plot(t, e["base_work"], ls=":", label="work by base")
+    ax.set_ylabel("energy (J)")
     ax.set_xlabel("time (s)")
-    ax.legend(loc="upper left", fontsize=8, ncol=2)
+    _legend(ax)
     ax = fig.add_subplot(grid[3, 1])
     ax.plot(t, run.accel[:, 0], label="ax")
     ax.plot(t, run.accel[:, 1], label="az")
     ax.set_ylabel("rachis accel (m/s²)")
     ax.set_xlabel("time (s)")
-    ax.legend(loc="upper right", fontsize=8)
-    _finish(plt, fig, run, path, title)
+    _legend(ax)
+    return fig

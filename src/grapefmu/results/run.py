@@ -146,30 +146,35 @@ class Run:
 
     def summary(self) -> dict[str, Any]:
         """The catalogue's cluster channels at the end of the run, the berries over the detachment force,
-        impact and per-berry figures, what the solver did, and `warnings` (results/trust.py)."""
+        impact and per-berry figures, what the solver did, and `warnings` (results/trust.py). A quantity's key
+        carries its unit as a CSV column does (catalogue.file_column: `peak_contact_force_n`, `wall_time_s`);
+        counts and flags have none. `compile_time_s`: numba's compile (or cache load) before the run, when the
+        caller measured it apart (solver/warmup.py); `wall_time_s` is then the solver's time alone."""
         th = self.scene.thresholds
         imp = self.impacts
         per_berry = self.dissipated_per_berry()
         names = self.scene.model.names
         over = detaching(self.peak_tension, th.detachment_force)
+        unit = catalogue.file_column
         # the run's end state (its impact book and peaks), not its last sample, which may lie before the end
         return {
-            "t_end": float(self.t[-1]), "samples": len(self.t), "berries": self.scene.model.n_berries,
+            unit("t_end", "s"): float(self.t[-1]), "samples": len(self.t), "berries": self.scene.model.n_berries,
             "collision_count": len(imp), "bruising_impacts": int(imp.bruising.sum()),
-            "peak_contact_force": float(self.peak_force.max(initial=0.0)),
-            "peak_pedicel_tension": float(self.peak_tension.max()),
-            "dissipated_energy": float(self.dissipated[-1]),
+            unit("peak_contact_force", "N"): float(self.peak_force.max(initial=0.0)),
+            unit("peak_pedicel_tension", "N"): float(self.peak_tension.max()),
+            unit("dissipated_energy", "J"): float(self.dissipated[-1]),
             "berries_over_detachment_force": int(over.sum()), "detachment_risk": bool(over.any()),
             "detached_berries": [names[i] for i in np.flatnonzero(over)],
             "fatigue_impacts": int(fatigue(imp.peak_force, th.bruise_force, th.fatigue_fraction).sum()),
             "damage_risk": bool(imp.bruising.any()),
-            "max_impact_energy": float(imp.dissipated.max()) if len(imp) else 0.0,
-            "max_dissipated_per_berry": float(per_berry.max()),
-            "mean_dissipated_per_berry": float(per_berry.mean()),
+            unit("max_impact_energy", "J"): float(imp.dissipated.max()) if len(imp) else 0.0,
+            unit("max_dissipated_per_berry", "J"): float(per_berry.max()),
+            unit("mean_dissipated_per_berry", "J"): float(per_berry.mean()),
             "max_active_pairs": int(self.active_pairs.max()) if len(self.t) else 0,
             **{k: v for k, v in self.stats.items() if k in (
-                "method", "steps", "rejected", "rhs_evaluations", "zeno_guard_activations", "wall_time",
+                "method", "steps", "rejected", "rhs_evaluations", "zeno_guard_activations",
                 "degrees_of_freedom", "candidate_pairs", "near_pairs_mean", "near_list_rebuilds")},
+            **{unit(k, "s"): self.stats[k] for k in ("wall_time", "compile_time") if k in self.stats},
             "warnings": trust.warnings(self),  # one line each where the results cannot be trusted
         }
 
@@ -184,6 +189,8 @@ class Run:
         return sorted(set(self.impacts.pair.tolist()) | set(np.flatnonzero(self.mode.any(axis=0)).tolist()))
 
     def columns(self) -> dict[str, np.ndarray]:
-        """time, then every catalogue channel; per pair only for the pairs that touched (a cluster has
-        thousands of idle candidate pairs)."""
-        return {"time": self.t, **catalogue.table(self.snapshot(), self.scene.model, self.touched_pairs)}
+        """time, then every catalogue channel, each named with its unit as CSV and Parquet files name it
+        (catalogue.file_column: `time_s`, `angle_left_rad`); per pair only for the pairs that touched (a cluster
+        has thousands of idle candidate pairs)."""
+        return {catalogue.file_column("time", "s"): self.t,
+                **catalogue.table(self.snapshot(), self.scene.model, self.touched_pairs, units=True)}

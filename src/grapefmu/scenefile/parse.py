@@ -37,7 +37,7 @@ EXCITATION_KEYS = {
     "sine": {"kind", "amplitude", "frequency", "start", "duration"},
     "sweep": {"kind", "amplitude", "f_start", "f_stop", "start", "duration"},
     "pick-and-place": {"kind", "moves", "start", "jerk_fraction"},
-    "csv": {"kind", "file", "hold"},
+    "csv": {"kind", "file", "hold", "after"},
 }
 SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events",
                "contact_location"}
@@ -311,7 +311,8 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
         f = raw.get("file")
         if not isinstance(f, str):
             raise SceneError(f"{key}.file", f"expected a path to a CSV of time, ax, az, got {v.show(f)}")
-        ex = exc.read_csv(base_dir / f, f"{key}.file", v.boolean(f"{key}.hold", raw.get("hold", False)))
+        after = v.choice(f"{key}.after", raw["after"], exc.AFTER) if "after" in raw else None
+        ex = exc.read_csv(base_dir / f, f"{key}.file", v.boolean(f"{key}.hold", raw.get("hold", False)), after)
         if abs(ex.arrays.table[:, 1:]).max() > acc:
             raise SceneError(f"{key}.file", f"accelerations must stay within ±{acc:g} m/s²")
         return ex

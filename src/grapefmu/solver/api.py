@@ -5,6 +5,7 @@ import math
 from collections.abc import Callable
 
 from ..errors import GrapefmuError
+from ..model.excitation import check_covers
 from ..model.model import Scene
 from ..results.run import Run
 from .budget import check_samples
@@ -32,6 +33,8 @@ def simulate(scene: Scene, t_end: float | None = None, *, method: str | None = N
                   scene.solver.output_interval if output_interval is None else output_interval,
                   "solver.t_end" if t_end is None else "t_end",
                   "solver.output_interval" if output_interval is None else "output_interval")
+    check_covers(scene.excitation, scene.solver.t_end if t_end is None else t_end,
+                 "solver.t_end" if t_end is None else "t_end")
     if method == "reference":
         from .reference import simulate_reference
         return run_by_group(scene, lambda sc, *_: simulate_reference(sc, t_end, rtol=rtol, atol=atol,

@@ -6,6 +6,7 @@ journal; the Parquet file is written atomically, sorted by run_id, only when eve
 """
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import sys
@@ -20,6 +21,10 @@ from .spec import SweepSpec, scene_doc
 from .worker import RESULT_COLUMNS, run_one
 
 
+#: how long a Dask scheduler has to answer before the sweep is refused (Dask's own default waits 30 s)
+SCHEDULER_TIMEOUT_S = 5.0
+
+
 def run_sweep(spec: SweepSpec, output: str | Path, *, workers: int | None = None, scheduler: str | None = None,
               progress: bool = True) -> Path:
     output = Path(output)
@@ -30,51 +35,112 @@ def run_sweep(spec: SweepSpec, output: str | Path, *, workers: int | None = None
         return output
     done = _read_journal(journal, spec.fingerprint)
     todo = [k for k in range(len(runs)) if k not in done]
-    where = f"Dask scheduler {scheduler}" if scheduler else f"{workers or os.cpu_count()} local processes"
-    _say(progress, f"sweep: {len(runs)} runs ({spec.mode}) of {spec.base.get('name', 'scene')} on {where}")
-    if done:
-        _say(progress, f"sweep: resuming, {len(done)} of {len(runs)} runs already done")
-    # (re)write the journal with only complete rows, so a line torn by a kill is not appended to
-    journal.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(journal) as tmp, open(tmp, "w") as fh:
-        fh.write(json.dumps({"fingerprint": spec.fingerprint}) + "\n")
-        fh.writelines(json.dumps(done[k]) + "\n" for k in sorted(done))
-    bar = _Bar(len(runs), len(done), progress)
-    with open(journal, "a") as fh:
-        for row in _execute(spec, runs, todo, workers, scheduler):
-            row = {"run_id": row["run_id"], **runs[row["run_id"]], **{c: row[c] for c in RESULT_COLUMNS}}
-            fh.write(json.dumps(row) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-            done[row["run_id"]] = row
-            bar.update(row["status"] != "ok")
+    client = _connect(scheduler) if scheduler else None  # an unreachable scheduler: refused before any file is written
+    try:
+        where = f"Dask scheduler {scheduler}" if scheduler else f"{workers or os.cpu_count()} local processes"
+        _say(progress, f"sweep: {len(runs)} runs ({spec.mode}) of {spec.base.get('name', 'scene')} on {where}")
+        if done:
+            _say(progress, f"sweep: resuming, {len(done)} of {len(runs)} runs already done")
+        if progress and not scheduler:
+            from ..solver.warmup import notice
+            notice()  # the workers compile (or load) the core before their first run
+        # (re)write the journal with only complete rows, so a line torn by a kill is not appended to
+        journal.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(journal) as tmp, open(tmp, "w") as fh:
+            fh.write(json.dumps({"fingerprint": spec.fingerprint}) + "\n")
+            fh.writelines(json.dumps(done[k]) + "\n" for k in sorted(done))
+        bar = _Bar(len(runs), len(done), progress)
+        try:
+            with open(journal, "a") as fh:
+                for row in _execute(spec, runs, todo, workers, client):
+                    row = {"run_id": row["run_id"], **runs[row["run_id"]], **{c: row[c] for c in RESULT_COLUMNS}}
+                    fh.write(json.dumps(row) + "\n")
+                    fh.flush()
+                    os.fsync(fh.fileno())
+                    done[row["run_id"]] = row
+                    bar.update(row["status"] != "ok")
+        except BaseException:
+            bar.close()
+            if not done:  # nothing finished: no journal to resume from
+                journal.unlink(missing_ok=True)
+            raise
+    finally:
+        if client is not None:
+            client.close()
     _write_parquet([done[k] for k in range(len(runs))], spec, output)
     journal.unlink()
     return output
 
 
-def _execute(spec: SweepSpec, runs: list[dict], todo: list[int], workers: int | None,
-             scheduler: str | None) -> Iterator[dict[str, Any]]:
-    base_dir = str(spec.base_dir)
-    if scheduler:
-        try:
-            from distributed import Client, wait
-        except ImportError as e:
-            raise GrapefmuError(f"scheduler: a Dask scheduler needs Dask distributed (pip install 'grapefmu[dask]'): {e}") from None
-        with Client(scheduler) as client:
-            submit = lambda k: client.submit(run_one, k, scene_doc(spec, runs[k]), base_dir,  # noqa: E731
-                                             key=f"grapefmu-run-{spec.fingerprint}-{k}", pure=False)
-            window = 4 * max(sum(client.nthreads().values()), 1)
-            yield from _windowed(submit, todo, window, lambda fs: wait(fs, return_when="FIRST_COMPLETED"))
-        return
-    import multiprocessing as mp
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor
-    from concurrent.futures import wait as wait_local
+def _connect(scheduler: str):
+    """A Dask client of the scheduler, or one line saying why not within SCHEDULER_TIMEOUT_S."""
+    try:
+        from distributed import Client
+    except ImportError as e:
+        raise GrapefmuError(f"--scheduler: a Dask scheduler needs Dask distributed (pip install 'grapefmu[dask]'): "
+                            f"{e}") from None
+    try:
+        return Client(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+    except (OSError, TimeoutError, ValueError, TypeError) as e:
+        raise GrapefmuError(f"--scheduler {scheduler}: no Dask scheduler answered within {SCHEDULER_TIMEOUT_S:g} s "
+                            f"({' '.join(str(e).split()) or type(e).__name__}); nothing was run") from None
 
-    n = workers or os.cpu_count() or 1
-    with ProcessPoolExecutor(max_workers=n, mp_context=mp.get_context("spawn")) as pool:
-        submit = lambda k: pool.submit(run_one, k, scene_doc(spec, runs[k]), base_dir)  # noqa: E731
-        yield from _windowed(submit, todo, 4 * n, lambda fs: wait_local(fs, return_when=FIRST_COMPLETED))
+
+def _quiet_worker() -> None:
+    """A local worker leaves SIGINT (a terminal's Ctrl-C reaches the whole process group) to the driver, which
+    stops it: no traceback from every worker."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _execute(spec: SweepSpec, runs: list[dict], todo: list[int], workers: int | None,
+             client) -> Iterator[dict[str, Any]]:
+    base_dir = str(spec.base_dir)
+    if client is not None:
+        from distributed import wait
+        submit = lambda k: client.submit(run_one, k, scene_doc(spec, runs[k]), base_dir,  # noqa: E731
+                                         key=f"grapefmu-run-{spec.fingerprint}-{k}", pure=False)
+        window = 4 * max(sum(client.nthreads().values()), 1)
+        yield from _windowed(submit, todo, window, lambda fs: wait(fs, return_when="FIRST_COMPLETED"))
+        return
+    yield from _local(spec, runs, todo, workers or os.cpu_count() or 1, base_dir)
+
+
+def _local(spec: SweepSpec, runs: list[dict], todo: list[int], n: int, base_dir: str) -> Iterator[dict[str, Any]]:
+    """Local worker processes (spawned), at most 4 n runs in flight; an interruption or a failure terminates
+    the workers at once instead of waiting for the runs they are in."""
+    import multiprocessing as mp
+    import queue
+
+    finished: queue.SimpleQueue = queue.SimpleQueue()
+    pool = mp.get_context("spawn").Pool(n, initializer=_quiet_worker)
+    try:
+        def submit(k: int) -> None:
+            pool.apply_async(run_one, (k, scene_doc(spec, runs[k]), base_dir), callback=finished.put,
+                             error_callback=finished.put)
+
+        pending = iter(todo)
+        in_flight = 0
+        for k in itertools.islice(pending, 4 * n):
+            submit(k)
+            in_flight += 1
+        while in_flight:
+            try:
+                row = finished.get(timeout=0.2)  # a short wait: SIGINT is handled between waits
+            except queue.Empty:
+                continue
+            in_flight -= 1
+            if isinstance(row, BaseException):
+                raise row
+            yield row
+            k = next(pending, None)
+            if k is not None:
+                submit(k)
+                in_flight += 1
+        pool.close()
+        pool.join()
+    finally:
+        pool.terminate()  # a no-op once closed and joined
 
 
 def _windowed(submit, todo: list[int], window: int, wait_first) -> Iterator[dict[str, Any]]:
@@ -160,8 +226,16 @@ class _Bar:
         bar = "#" * int(30 * self.done / self.total)
         sys.stderr.write(f"\rsweep [{bar:<30}] {self.done}/{self.total} runs, {self.failed} failed, "
                          f"{wall:.0f} s, eta {eta:.0f} s ")
-        if self.done == self.total:
+        self.open = self.done < self.total
+        if not self.open:
             sys.stderr.write("\n")
         sys.stderr.flush()
+
+    def close(self) -> None:
+        """End a bar left without its newline (an interruption): the message that follows gets its own line."""
+        if getattr(self, "open", False):
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+            self.open = False
 
 

@@ -8,7 +8,8 @@
     [[parameters]]
     key = "contact.stiffness"      # a key of the base scene: tables by name, lists by [i] or [*]
     values = [1000.0, 2000.0]      # grid: every combination of every parameter's values
-    # monte-carlo: distribution = "uniform" (low, high), "normal" (mean, sd) or "choice" (values)
+    # monte-carlo: distribution = "uniform" (low, high), "normal" (mean, sd) or "choice" (values);
+    # a key with [*] draws one value per element (per berry) unless shared = true (one draw for all)
 
 Every run's inputs are fixed here, in the driver, before anything is executed: the rows cannot
 depend on the executor, the number of workers or the order runs finish in.
@@ -31,8 +32,11 @@ from ..scenefile.parse import loads_toml, read_text
 
 KEY_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d{1,9}|\*)\])?")
 SPEC_KEYS = {"scene", "mode", "samples", "seed", "parameters"}
-PARAM_KEYS = {"key", "values", "distribution", "low", "high", "mean", "sd"}
+PARAM_KEYS = {"key", "values", "distribution", "low", "high", "mean", "sd", "shared"}
 MAX_RUNS = 1_000_000
+#: changes when the same spec text expands to different runs (2: per-element draws for [*] keys), so a
+#: journal or table of an older expansion is never mixed in
+FORMAT = 2
 
 
 @dataclass(frozen=True)
@@ -42,8 +46,14 @@ class Parameter:
     distribution: str = "grid"
     a: float = 0.0
     b: float = 0.0
+    each: int = 0  # monte-carlo over a [*] key: one draw per element (this many), as a list; 0: one draw
 
     def draw(self, rng: np.random.Generator) -> Any:
+        if self.each:
+            return [self._one(rng) for _ in range(self.each)]
+        return self._one(rng)
+
+    def _one(self, rng: np.random.Generator) -> Any:
         if self.distribution == "uniform":
             return float(rng.uniform(self.a, self.b))
         if self.distribution == "normal":
@@ -64,7 +74,7 @@ class SweepSpec:
     @property
     def fingerprint(self) -> str:
         """Identifies the runs: a journal or output written for another spec is never mixed in."""
-        return hashlib.sha256(self.text.encode()).hexdigest()[:16]
+        return hashlib.sha256(f"grapefmu sweep {FORMAT}\n{self.text}".encode()).hexdigest()[:16]
 
     def runs(self) -> list[dict[str, Any]]:
         """The inputs of every run, in run order: {key: value}."""
@@ -106,21 +116,26 @@ def _parameter(key: str, raw: Any, mode: str, base: dict) -> Parameter:
     path = raw.get("key")
     if not isinstance(path, str):
         raise SceneError(f"{key}.key", "expected a path into the scene such as \"contact.stiffness\"")
-    apply(copy.deepcopy(base), path, 0.0, where=f"{key}.key")  # the path exists in the base scene
+    slots = len(_slots(copy.deepcopy(base), path, f"{key}.key"))  # the path exists in the base scene
     dist = raw.get("distribution", "grid" if mode == "grid" else None)
     if mode == "grid":
         if dist != "grid":
             raise SceneError(f"{key}.distribution", "a grid sweep takes values lists only")
+        if "shared" in raw:
+            raise SceneError(f"{key}.shared", "a grid sweep sets every element of a [*] key to each value; "
+                                              "shared is for monte-carlo")
         return Parameter(path, _values(f"{key}.values", raw.get("values")))
     dist = v.choice(f"{key}.distribution", dist, ("uniform", "normal", "choice"))
+    shared = v.boolean(f"{key}.shared", raw.get("shared", False))
+    each = slots if "[*]" in path and not shared else 0
     if dist == "choice":
-        return Parameter(path, _values(f"{key}.values", raw.get("values")), "choice")
+        return Parameter(path, _values(f"{key}.values", raw.get("values")), "choice", each=each)
     if dist == "uniform":
         lo = v.number(f"{key}.low", raw.get("low"), -1e12, 1e12)
         hi = v.number(f"{key}.high", raw.get("high"), lo, 1e12)
-        return Parameter(path, (), "uniform", lo, hi)
+        return Parameter(path, (), "uniform", lo, hi, each)
     return Parameter(path, (), "normal", v.number(f"{key}.mean", raw.get("mean"), -1e12, 1e12),
-                     v.number(f"{key}.sd", raw.get("sd"), 0.0, 1e12))
+                     v.number(f"{key}.sd", raw.get("sd"), 0.0, 1e12), each)
 
 
 def _values(key: str, raw: Any) -> tuple[Any, ...]:
@@ -132,10 +147,12 @@ def _values(key: str, raw: Any) -> tuple[Any, ...]:
     return tuple(raw)
 
 
-def apply(doc: dict, path: str, value: Any, where: str = "key") -> None:
-    """Set doc at a dotted path; [*] sets every element of a list."""
+def _slots(doc: dict, path: str, where: str = "key") -> list[tuple[Any, Any]]:
+    """Every (container, name or index) a dotted path reaches in doc, in document order; [*] reaches every
+    element of a list."""
     parts = path.split(".")
-    targets = [doc]
+    targets: list[Any] = [doc]
+    slots: list[tuple[Any, Any]] = []
     for n, part in enumerate(parts):
         m = KEY_RE.fullmatch(part)
         if not m:
@@ -149,7 +166,7 @@ def apply(doc: dict, path: str, value: Any, where: str = "key") -> None:
                                         "(write the key into the scene, with its default, to sweep it)")
             if index is None:
                 if last:
-                    t[name] = value
+                    slots.append((t, name))
                 else:
                     nxt.append(t[name])
                 continue
@@ -161,15 +178,26 @@ def apply(doc: dict, path: str, value: Any, where: str = "key") -> None:
                 if i >= len(seq):
                     raise SceneError(where, f"{path!r}: {name!r} has only {len(seq)} entries")
                 if last:
-                    seq[i] = value
+                    slots.append((seq, i))
                 else:
                     nxt.append(seq[i])
         targets = nxt
+    return slots
+
+
+def apply(doc: dict, path: str, value: Any, where: str = "key", each: bool = False) -> None:
+    """Set doc at a dotted path; [*] sets every element of a list (with `each`, element k to value[k])."""
+    slots = _slots(doc, path, where)
+    if each and (not isinstance(value, list) or len(value) != len(slots)):
+        raise SceneError(where, f"{path!r}: expected {len(slots)} values, one per element, got {value!r}")
+    for k, (container, name) in enumerate(slots):
+        container[name] = value[k] if each else value
 
 
 def scene_doc(spec: SweepSpec, inputs: dict[str, Any]) -> dict:
     doc = copy.deepcopy(spec.base)
+    each = {p.key for p in spec.parameters if p.each}
     for key, value in inputs.items():
-        apply(doc, key, value)
+        apply(doc, key, value, each=key in each)
     return doc
 
