@@ -6,10 +6,10 @@ through `grapefmu_refuse(status, message)`, which logs the message and makes the
 return that status; the slave's values and state stay as they were."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from grapefmu import GrapefmuError, __version__
+from grapefmu.solver.warmup import notice
 
 from .core import FmuCore
 from .report import stderr_refuse, refuse_function
@@ -128,6 +128,7 @@ class GrapeSlaveMixin:
         self.phase = "initialization"
 
     def exit_initialization_mode(self):
+        notice(lambda line: self._refuse(line, OK))  # logged (status OK) before the core's first compile
         err = self.core.initialize(self.start_time)
         if err:
             self._refuse(err)
