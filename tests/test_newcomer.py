@@ -305,7 +305,7 @@ def test_every_command_has_a_description_and_the_default_of_every_option():
     assert "(default: 1.0)" in replay
 
 
-@pytest.mark.parametrize("module", ["grapefmu_ros.demo", "grapefmu_ros.controller"])
+@pytest.mark.parametrize("module", ["grapefmu_ros", "grapefmu_ros.demo", "grapefmu_ros.controller"])
 def test_the_ros_entry_points_have_whole_help_pages(module):
     r = subprocess.run([sys.executable, "-m", module, "--help"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "Traceback" not in r.stderr

@@ -113,3 +113,9 @@ def test_the_foxglove_layout_is_current_and_names_only_recorded_topics(run, tmp_
     named = foxglove.topics(shipped)
     assert named and named <= recorded
     assert {"/tf", "/tf_static", absolute("robot_description"), absolute("markers"), "/clock"} <= recorded
+
+
+def test_the_summary_message_is_the_catalogue():
+    from grapefmu.recording.messages import summary_msg
+    from grapefmu.recording.typestore import MSG_DIR
+    assert (MSG_DIR / "Summary.msg").read_text(encoding="utf-8") == summary_msg()  # regenerate it from summary_msg()

@@ -19,10 +19,9 @@ rclpy = pytest.importorskip("rclpy")
 from geometry_msgs.msg import AccelStamped  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64MultiArray  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from grapefmu_msgs.msg import CollisionEvent, Contacts  # noqa: E402
+from grapefmu_msgs.msg import CollisionEvent, Contacts, Summary  # noqa: E402
 
 from grapefmu import Solver, load_scene  # noqa: E402
 from grapefmu.scenefile import default_scene_path  # noqa: E402
@@ -313,7 +312,6 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
     from visualization_msgs.msg import MarkerArray
 
     from grapefmu.cli import main as cli
-    from grapefmu.recording.messages import SUMMARY_FIELDS
 
     scene = tmp_path / "cluster.toml"
     assert cli(["cluster", "--berries", "30", "--seed", "2", "-o", str(scene)]) == 0
@@ -321,7 +319,7 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
     with sim_node(tmp_path, extra=["-p", f"scene:={scene}", "-p", "marker_rate_hz:=50.0"]) as (proc, rec):
         ctl = Controller("cluster_controller")
         summaries, contacts, markers = [], [], []
-        ctl.node.create_subscription(Float64MultiArray, "summary", summaries.append, QOS)
+        ctl.node.create_subscription(Summary, "summary", summaries.append, QOS)
         ctl.node.create_subscription(Contacts, "contacts", contacts.append, QOS)
         ctl.node.create_subscription(MarkerArray, "markers", markers.append, QOS)
         ctl.connect()
@@ -336,15 +334,13 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
     last = ctl.state_at(t_last)
     assert len(last.name) == 60 and last.name[:2] == ["twig_b000_swing", "twig_b000_tilt"]
     np.testing.assert_array_equal(last.position, solver.angles)
-    fields = summaries[-1].layout.dim[0].label.split(",")
-    assert fields == list(SUMMARY_FIELDS)
-    final = [s for s in summaries if s.data[0] == pytest.approx(t_last, abs=1e-12)][-1]
-    assert final.data[fields.index("active_pairs")] == np.count_nonzero(solver.modes)
+    final = [s for s in summaries if s.time == pytest.approx(t_last, abs=1e-12)][-1]
+    assert final.active_pairs == np.count_nonzero(solver.modes)
     # the solver's running peak, or the force now if larger (docs/outputs.md), read from the solver directly
-    assert final.data[fields.index("peak_contact_force")] == max(solver.totals()["peak_contact_force"][0],
-                                                                 solver.observe().contact_force.max(initial=0.0))
-    assert final.data[fields.index("collision_count")] == solver.totals()["collision_count"][0] > 0
-    assert max(s.data[fields.index("active_pairs")] for s in summaries) > 0
+    assert final.peak_contact_force == max(solver.totals()["peak_contact_force"][0],
+                                           solver.observe().contact_force.max(initial=0.0))
+    assert final.collision_count == solver.totals()["collision_count"][0] > 0
+    assert max(s.active_pairs for s in summaries) > 0
     busy = [c for c in contacts if c.contacts]
     assert busy
     names = set(load_scene(scene).model.names)

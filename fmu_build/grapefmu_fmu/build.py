@@ -36,11 +36,7 @@ _RESOURCES = os.path.dirname(os.path.abspath(__file__))
 _BUILT_WITH = {version!r}
 _BUNDLE_KEY = {key!r}  # grapefmu version and a digest of the bundled sources and compiled core
 
-# pythonfmu's loader executes this file again for every instance and then releases a reference to
-# the module's dict that it never took (a borrowed one); after a few instances the dict would be
-# freed and the next instance fail. Taking one reference per execution keeps the count balanced.
-sys.__dict__.setdefault("_grapefmu_module_dicts", []).append(globals())
-
+{module_dict}
 
 def _installed_matches():
     try:
@@ -92,6 +88,14 @@ class {cls}(GrapeFmi{fmi}Slave, Fmi{fmi}Slave):
     pass
 '''
 
+#: FMI 2 only: pythonfmu 0.7's loader executes the script again for every instance and then releases a
+#: reference to the module's dict that it never took, so after a few instances the dict would be freed.
+#: pythonfmu3 neither re-executes the script nor releases the dict (its count stays put per instance).
+MODULE_DICT_FIX = """# pythonfmu's loader executes this file again for every instance and then releases a reference to
+# the module's dict that it never took (a borrowed one); taking one reference per execution balances it.
+sys.__dict__.setdefault("_grapefmu_module_dicts", []).append(globals())
+"""
+
 #: what the FMU needs from a package index (names as pyproject.toml spells them)
 RUNTIME = ("numpy", "scipy", "numba")
 
@@ -130,6 +134,7 @@ def build_fmu(scene_path: str | Path, out: str | Path, fmi: int = 2, outputs: st
         (src / "requirements.txt").write_text(requirements(fmi))
         key = f"{grapefmu.__version__}-{_digest(bundle)}"
         script.write_text(SCRIPT.format(version=grapefmu.__version__, scene=scene.name, fmi=fmi, key=key,
+                                        module_dict=MODULE_DICT_FIX if fmi == 2 else "",
                                         pythonfmu="pythonfmu" if fmi == 2 else "pythonfmu3", cls=ident))
         (src / shim.PYTHON_FILE).write_text(shim.python_file())
         built = _run_builder(script, [src / "scene.toml", src / OUTPUTS_FILE, bundle, src / "requirements.txt",

@@ -20,9 +20,7 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
-from grapefmu_msgs.msg import CollisionEvent
-from std_msgs.msg import Float64MultiArray
+from grapefmu_msgs.msg import CollisionEvent, PedicelTension, Summary
 
 from builtin_interfaces.msg import Time
 
@@ -54,12 +52,12 @@ class HarvestController(Node):
         self.profile = pick_and_place(MOVES, start=0.1)
         self.t_move_end = float(self.profile.arrays.table[-1, 0])
         self.pub = self.create_publisher(AccelStamped, "rachis/accel", QOS)
-        self.create_subscription(JointState, "pedicel_tension", self.on_tension, QOS)
+        self.create_subscription(PedicelTension, "pedicel_tension", self.on_tension, QOS)
         self.create_subscription(Clock, "/clock", self.on_clock, QOS)
         self.create_subscription(CollisionEvent, "collision_events", self.on_event,
                                  QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                                             reliability=ReliabilityPolicy.RELIABLE))
-        self.create_subscription(Float64MultiArray, "summary", self.on_summary, QOS)
+        self.create_subscription(Summary, "summary", self.on_summary, QOS)
         self.latest = {"tension": (None, 0.0), "clock": None, "force": (None, 0.0)}
         self.sent_t = None    # stamp of the last command sent
         self.s = 0.0          # progress along the nominal profile, s
@@ -71,17 +69,14 @@ class HarvestController(Node):
         self.done = False
 
     def on_tension(self, m):
-        self.latest["tension"] = (_t(m.header.stamp), max(m.effort) if m.effort else 0.0)
+        self.latest["tension"] = (_t(m.header.stamp), max(m.tension) if len(m.tension) else 0.0)
         self.peak_tension = max(self.peak_tension, self.latest["tension"][1])
         self.try_command()
 
     def on_summary(self, m):
-        """The node's summary: time and the largest contact force right now (messages.SUMMARY_FIELDS)."""
-        fields = m.layout.dim[0].label.split(",") if m.layout.dim else []
-        if "time" not in fields:
-            return
-        f = m.data[fields.index("max_contact_force")]
-        self.latest["force"] = (m.data[fields.index("time")], f)
+        """The node's summary: simulated time and the largest contact force right now."""
+        f = m.max_contact_force
+        self.latest["force"] = (m.time, f)
         self.peak_force = max(self.peak_force, f)
         self.try_command()
 

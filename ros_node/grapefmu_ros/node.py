@@ -44,6 +44,35 @@ TOPIC_QOS = {"collision_events": EVENTS_QOS, "markers": 10, "/diagnostics": 10, 
              "/tf_static": LATCHED_QOS, "robot_description": LATCHED_QOS}
 
 
+#: (name, default, description, (low, high) or None, read-only): declared by the node, listed by --help
+PARAMETERS = [
+    ("scene", str(default_scene_path()), "Scene TOML (structure: read-only)", None, True),
+    ("mode", "realtime", "realtime (wall-clock locked timer) or lockstep (advance to each input stamp)", None, True),
+    ("rate_hz", 1000.0, "Real-time mode: simulation and joint_states rate, Hz", (1, 10000), True),
+    ("real_time_factor", 1.0, "Simulated seconds per wall second in real-time mode", (0.01, 100), False),
+    ("max_accel", MAX_ACCEL, "Inputs above this acceleration (m/s²) are rejected (at most the solver's own bound)",
+     (0, MAX_ACCEL), False),
+    ("marker_rate_hz", 30.0, "MarkerArray rate, Hz (0: none)", (0, 1000), False),
+    ("tf_rate_hz", 100.0, "/tf rate, Hz (TF listeners interpolate between transforms)", (1, 10000), False),
+    ("pose_filter_hz", 20.0, "Low-pass cutoff for accelerations differentiated from rachis/pose, Hz", (0.1, 1000),
+     False),
+    ("record", "", "MCAP file to record every topic to ('' for none)", None, True),
+    ("gripper_frame", "", "TF frame of the gripper holding the rachis, looked up on /tf against `world` ('' for "
+     "none: inputs come on rachis/accel or rachis/pose)", None, True),
+]
+
+
+def usage() -> str:
+    lines = ["usage: python -m grapefmu_ros [--help] --ros-args [-p NAME:=VALUE ...] [-r __ns:=/NAMESPACE]", "",
+             "The grapefmu simulator as a ROS 2 node: berries on hinged twigs that swing and collide while the",
+             "gripper moves the rachis (topics, frames and time: docs/ros.md). Ctrl-C or SIGTERM stop it and",
+             f"finish its recording. Namespace: {msgs.NAMESPACE}.", "", "options: (ROS parameters, -p NAME:=VALUE)"]
+    for name, default, description, bounds, read_only in PARAMETERS:
+        extra = (f", {bounds[0]:g} to {bounds[1]:g}" if bounds else "") + (", read-only" if read_only else "")
+        lines.append(f"  {name:<18} {description} (default: {default!r}{extra})")
+    return "\n".join(lines)
+
+
 def _range(lo, hi):
     return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
@@ -52,31 +81,10 @@ class SimulatorNode(Node):
     def __init__(self, **kwargs):
         kwargs.setdefault("namespace", msgs.NAMESPACE)  # `-r __ns:=/other` moves everything, frames included
         super().__init__("grapefmu", **kwargs)
-        ro = dict(read_only=True)
-        self.declare_parameter("scene", str(default_scene_path()),
-                               ParameterDescriptor(description="Scene TOML (structure: read-only)", **ro))
-        self.declare_parameter("mode", "realtime", ParameterDescriptor(
-            description="realtime (wall-clock locked timer) or lockstep (advance to each input stamp)", **ro))
-        self.declare_parameter("rate_hz", 1000.0, ParameterDescriptor(
-            description="Real-time mode: simulation and joint_states rate, Hz", floating_point_range=_range(1, 10000), **ro))
-        self.declare_parameter("real_time_factor", 1.0, ParameterDescriptor(
-            description="Simulated seconds per wall second in real-time mode", floating_point_range=_range(0.01, 100)))
-        self.declare_parameter("max_accel", MAX_ACCEL, ParameterDescriptor(
-            description="Inputs above this acceleration (m/s²) are rejected (at most the solver's own bound)",
-            floating_point_range=_range(0, MAX_ACCEL)))
-        self.declare_parameter("marker_rate_hz", 30.0, ParameterDescriptor(
-            description="MarkerArray rate, Hz (0: none)", floating_point_range=_range(0, 1000)))
-        self.declare_parameter("tf_rate_hz", 100.0, ParameterDescriptor(
-            description="/tf rate, Hz (TF listeners interpolate between transforms)",
-            floating_point_range=_range(1, 10000)))
-        self.declare_parameter("pose_filter_hz", 20.0, ParameterDescriptor(
-            description="Low-pass cutoff for accelerations differentiated from rachis/pose, Hz",
-            floating_point_range=_range(0.1, 1000)))
-        self.declare_parameter("record", "", ParameterDescriptor(
-            description="MCAP file to record every topic to ('' for none)", **ro))
-        self.declare_parameter("gripper_frame", "", ParameterDescriptor(
-            description="TF frame of the gripper holding the rachis, looked up on /tf against `world` ('' for "
-                        "none: inputs come on rachis/accel or rachis/pose)", **ro))
+        for name, default, description, bounds, read_only in PARAMETERS:
+            self.declare_parameter(name, default, ParameterDescriptor(
+                description=description, read_only=read_only,
+                floating_point_range=_range(*bounds) if bounds else []))
         gp = lambda n: self.get_parameter(n).value  # noqa: E731
         self.mode = gp("mode")
         if self.mode not in ("realtime", "lockstep"):
@@ -319,6 +327,11 @@ def main(args=None):
 
     from rclpy.signals import SignalHandlerOptions
 
+    argv = sys.argv[1:] if args is None else list(args)
+    ours = argv[:argv.index("--ros-args")] if "--ros-args" in argv else argv  # the rest is ROS's
+    if any(a in ("-h", "--help") for a in ours):
+        print(usage())
+        return
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = []
     for sig in (signal.SIGINT, signal.SIGTERM):

@@ -7,7 +7,7 @@ Layouts → Import from file. Regenerate it with
 from __future__ import annotations
 
 from ..model.model import Model
-from .messages import SUMMARY_FIELDS, absolute, wrench_topics
+from .messages import absolute, wrench_topics
 
 
 def _plot(title: str, paths: list[tuple[str, str]]) -> dict:
@@ -20,10 +20,10 @@ def layout(model: Model) -> dict:
     js, tension = absolute("joint_states"), absolute("pedicel_tension")
     summary = absolute("summary")
     angles = [(f"{js}.position[{k}]", f"{d} (rad)") for k, d in enumerate(model.dof_names)]
-    tensions = [(f"{tension}.effort[{k}]", f"{b} (N)") for k, b in enumerate(model.names)]
+    tensions = [(f"{tension}.tension[{k}]", f"{b} (N)") for k, b in enumerate(model.names)]
     forces = ([(f"{absolute(t)}.wrench.force.x", f"{t.split('/')[1]} x (N)") for t in wrench_topics(model)]
-              or [(f"{summary}.data[{SUMMARY_FIELDS.index('max_contact_force')}]", "largest contact force (N)")])
-    energy = [(f"{summary}.data[{SUMMARY_FIELDS.index('dissipated_energy')}]", "dissipated (J)")]
+              or [(f"{summary}.max_contact_force", "largest contact force (N)")])
+    energy = [(f"{summary}.dissipated_energy", "dissipated (J)")]
     config = {
         "3D!grapes": {"followTf": "world", "scene": {"transforms": {"showLabel": False}},
                       "topics": {absolute("markers"): {"visible": True},
