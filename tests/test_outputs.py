@@ -119,3 +119,12 @@ def test_the_summary_message_is_the_catalogue():
     from grapefmu.recording.messages import summary_msg
     from grapefmu.recording.typestore import MSG_DIR
     assert (MSG_DIR / "Summary.msg").read_text(encoding="utf-8") == summary_msg()  # regenerate it from summary_msg()
+
+
+def test_a_negative_pedicel_tension_is_explained_where_it_is_shown():
+    """It is the twig in compression (a contact or the base pushing the berry toward its hinge): the channel's
+    description and the figure's axis say so."""
+    import inspect
+    from grapefmu.results import catalogue, plot
+    assert "compression" in catalogue.channel("pedicel_tension").description
+    assert "compressed" in inspect.getsource(plot)

@@ -132,7 +132,8 @@ CHANNELS: tuple[Channel, ...] = (
             "joint_states"),
     Channel("hinge_torque", "N.m", "angle", "real", "Torque of the viscoelastic hinge on the twig, −k (q − q₀) − c q̇",
             lambda s: s.observation.hinge_torque, "joint_states", fmu=False),
-    Channel("pedicel_tension", "N", "berry", "real", "Pedicel (twig) tension, positive pulling", _tension,
+    Channel("pedicel_tension", "N", "berry", "real", "Pedicel (twig) tension, positive pulling; negative (the twig "
+            "in compression) while a contact or the base's acceleration pushes the berry toward its hinge", _tension,
             "pedicel_tension"),
     Channel("position_x", "m", "berry", "real", "Berry centre x, world frame", _world(0), "markers", fmu=False),
     Channel("position_y", "m", "berry", "real", "Berry centre y, world frame", _world(1), "markers", fmu=False),

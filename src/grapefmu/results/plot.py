@@ -79,7 +79,7 @@ def _lines_figure(run: Run):
     for i, name in enumerate(m.names):
         ax[2].plot(t, run.pedicel_tension[:, i], label=name)
     ax[2].axhline(th.detachment_force, color="r", ls="--", lw=0.8, label=f"detachment {th.detachment_force:g} N")
-    ax[2].set_ylabel("pedicel tension (N)")
+    ax[2].set_ylabel("pedicel tension (N)\n< 0: twig compressed")
     _legend(ax[2])
     e = run.energy
     for k in ("kinetic", "gravity", "hinge_elastic", "contact_elastic"):
