@@ -2,8 +2,6 @@
 each over DDS with the node in its own process."""
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
@@ -128,7 +126,7 @@ def test_the_gripper_motion_comes_from_a_tf_frame_of_another_process(ros, tmp_pa
     import subprocess
     import sys
     from .test_ros_node import ENV
-    publisher = f"""
+    publisher = """
 import time, rclpy
 from tf2_msgs.msg import TFMessage
 from geometry_msgs.msg import TransformStamped

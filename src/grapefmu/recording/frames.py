@@ -59,7 +59,7 @@ def transforms(model: Model, snap: catalogue.Snapshot, k: int, prefix: str = PRE
 def urdf(model: Model, prefix: str = PREFIX) -> str:
     """A URDF of the cluster consistent with `transforms` (floating joints: TF gives their poses)."""
     root = rachis(prefix)
-    lines = [f'<?xml version="1.0"?>', f'<robot name={quoteattr(prefix.strip("/") or "grape_cluster")}>',
+    lines = ['<?xml version="1.0"?>', f'<robot name={quoteattr(prefix.strip("/") or "grape_cluster")}>',
              f'  <link name={quoteattr(root)}/>']
     for name, h, b in zip(model.names, hinges(model), model.berries):
         link, hinge = f"{prefix}{name}", f"{prefix}{name}_hinge"
@@ -75,7 +75,7 @@ def urdf(model: Model, prefix: str = PREFIX) -> str:
             f'</material></visual>',
             f'    <inertial><mass value="{b.mass!r}"/><inertia ixx="{0.4 * b.mass * b.radius ** 2!r}" ixy="0" ixz="0" '
             f'iyy="{0.4 * b.mass * b.radius ** 2!r}" iyz="0" izz="{0.4 * b.mass * b.radius ** 2!r}"/></inertial>',
-            f'  </link>',
+            '  </link>',
             f'  <joint name={quoteattr(link + "_joint")} type="floating"><parent link={quoteattr(root)}/>'
             f'<child link={quoteattr(link)}/></joint>',
         ]
