@@ -164,8 +164,6 @@ def play(path, unzipped, md, program, index):
     st, _ = a.step(a.t, 1e-3) if a.t + 1e-3 <= STOP else (0, None)
     if st > 1:
         problems.append(f"a normal step after the program was refused (status {st})")
-    if "-v" in sys.argv:
-        print(index, a.get_real(outputs)[1], b.get_real(outputs)[1], file=sys.stderr)
     else:
         b.step(b.t, 1e-3)
     ya, yb = a.get_real(outputs)[1], b.get_real(outputs)[1]

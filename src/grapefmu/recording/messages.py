@@ -27,7 +27,6 @@ from . import frames
 from .stamps import to_ns
 from .typestore import header, msg, stamp
 
-FRAME = frames.rachis()
 WORLD = frames.WORLD
 #: the node's default namespace; recordings name topics absolutely under it, as rosbag2 does
 NAMESPACE = "/grape_cluster"
