@@ -1,37 +1,84 @@
-"""Fixed costs around the integration itself: numba unboxing the model and state on every compiled call,
-one 1 ms Solver.advance, and a whole simulate() of a very short run (Python set-up and result assembly).
-Run: .venv/bin/python benchmarks/call_overhead.py"""
+"""Fixed costs around the integration itself: numba unboxing the model and state on a compiled call,
+Solver.advance's cost per call beyond the physics it integrates, and a whole simulate() of a very short run
+(Python set-up and result assembly).
+
+advance's fixed cost is measured as (N calls of advance(dt) − one compiled loop that integrates to the same N
+communication points with the same held input) / N: both take exactly the same solver steps, so what is left
+is the call itself (checks, boxing, saving the state for rollback). Interleaved, best
+of 7. Run: .venv/bin/python benchmarks/call_overhead.py [scene.toml]"""
 from __future__ import annotations
 
+import sys
 import time
+
+import numba as nb
+import numpy as np
 
 import grapefmu
 from grapefmu import Solver
 from grapefmu.scenefile import default_scene_path
+from grapefmu.solver.loop import DONE, integrate
+
+N, DT, ACCEL = 2000, 1e-3, (0.5, 0.0)
 
 
-def best(fn, n=2000, reps=5):
-    fn()
-    out = []
-    for _ in range(reps):
-        t = time.perf_counter()
-        for _ in range(n):
-            fn()
-        out.append((time.perf_counter() - t) / n)
-    return min(out)
+@nb.njit
+def _compiled_loop(s, dt, n):
+    """The same communication points as n calls of advance(dt), without leaving compiled code."""
+    S = s.state
+    inp = S.input[0]
+    inp.held, inp.ax, inp.az = True, 0.5, 0.0
+    for k in range(n):
+        if integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, S.physical.t[0] + dt,
+                     10_000_000) != DONE:
+            return False
+        s.scratch.cursor[0].n_impacts = 0
+    return True
 
 
-def main():
-    scene = grapefmu.load_scene(default_scene_path())
+def main(path: str) -> None:
+    scene = grapefmu.load_scene(path)
     s = Solver(scene)
-    s.advance(1e-3, (1.0, 0.0))
-    noop = best(lambda: s._integrate(s.t, s._scratch, 1))
-    adv = best(lambda: s.advance(1e-3, (1.0, 0.0)))
-    sim = best(lambda: grapefmu.simulate(scene, 1e-3), n=200)
-    print(f"compiled call that integrates nothing (argument unboxing): {noop * 1e6:7.1f} µs")
-    print(f"Solver.advance(1 ms) with a held input:                     {adv * 1e6:7.1f} µs")
-    print(f"simulate(scene, t_end = 1 ms), set-up and result assembly:   {sim * 1e6:7.1f} µs")
+    s.advance(DT, ACCEL)
+    start = s.get_state()
+
+    def by_advance():
+        for _ in range(N):
+            s.advance(DT, ACCEL)
+        s.take_impacts()
+
+    def compiled():
+        assert _compiled_loop(s._session, DT, N)
+
+    def noop():
+        for _ in range(N):
+            s._integrate(s.t, s._scratch, 1)
+
+    times = {by_advance: [], compiled: [], noop: []}
+    ends = {}
+    for _ in range(7):
+        for fn in times:
+            s.set_state(start)
+            w = time.perf_counter()
+            fn()
+            times[fn].append((time.perf_counter() - w) / N)
+            ends[fn] = s.y
+    assert np.array_equal(ends[by_advance], ends[compiled]), "the two loops must take the same steps"
+    adv, comp, nop = (min(times[f]) for f in (by_advance, compiled, noop))
+    sim = min(_timed(lambda: grapefmu.simulate(scene, 1e-3)) for _ in range(200))
+    print(f"scene {path}, {N} steps of {DT * 1e3:g} ms, best of 7 (µs per call)")
+    print(f"compiled call that integrates nothing (integrate(), ~40 arrays unboxed): {nop * 1e6:7.2f}")
+    print(f"Solver.advance(1 ms), held input:                                       {adv * 1e6:7.2f}")
+    print(f"the same communication points in one compiled loop:                     {comp * 1e6:7.2f}")
+    print(f"advance fixed cost (the difference):                                    {(adv - comp) * 1e6:7.2f}")
+    print(f"simulate(scene, t_end = 1 ms), set-up and result assembly:              {sim * 1e6:7.1f}")
+
+
+def _timed(fn) -> float:
+    w = time.perf_counter()
+    fn()
+    return time.perf_counter() - w
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1] if len(sys.argv) > 1 else str(default_scene_path()))

@@ -1,10 +1,11 @@
-"""Cost per 1 ms communication step: the raw core, the FMU through fmpy and through libcosimpy, and a
+"""Cost per 1 ms communication step: the raw core, the FMU through fmpy, libcosimpy and ecospy, and a
 do-nothing pythonfmu FMU with the same variables through the same importers (the importer's and
 pythonfmu's own overhead). Wrapper overhead = FMU − null FMU − raw core. Each step sets both inputs, steps
 and reads every Real output ("fmpy-angles": only the two angles a controller would read).
 Run: .venv/bin/python benchmarks/fmu_step_cost.py   (builds into a temporary directory)."""
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import tempfile
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 N_STEPS = 2000
+IMPORTERS = ("fmpy", "fmpy-angles", "libcosimpy", "ecospy")
 DT = 1e-3
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -72,6 +74,22 @@ WORKER = textwrap.dedent('''
                 t += dt
             best = min(best, (time.perf_counter() - w) / n)
             f.terminate(); f.freeInstance()
+        elif importer == "ecospy":
+            from ecospy import EcosSimulation, EcosSimulationStructure
+            ss = EcosSimulationStructure()
+            ss.add_model(f"a{rep}", path)
+            sim = EcosSimulation(structure=ss, step_size=dt)
+            sim.init()
+            sim.step()
+            names = [f"a{rep}::{v.name}" for v in md.modelVariables if v.valueReference in outs and v.causality == "output" and v.type == "Real"]
+            w = time.perf_counter()
+            for k in range(n):
+                sim.set_real(f"a{rep}::base_ax", acc[k])
+                sim.set_real(f"a{rep}::base_az", 0.0)
+                sim.step()
+                [sim.get_real(x) for x in names]
+            best = min(best, (time.perf_counter() - w) / n)
+            sim.terminate()
         else:
             from libcosimpy.CosimExecution import CosimExecution
             from libcosimpy.CosimManipulator import CosimManipulator
@@ -88,7 +106,9 @@ WORKER = textwrap.dedent('''
                 ex.step()
                 o.last_real_values(a, outs)
             best = min(best, (time.perf_counter() - w) / n)
-    print("JSON:" + json.dumps(best))
+    print("JSON:" + json.dumps(best), flush=True)
+    import os
+    os._exit(0)  # pythonfmu's own binary (the null FMU) may abort in Python's teardown: the figure is out
 ''')
 
 
@@ -118,13 +138,14 @@ def main() -> None:
         (d / "worker.py").write_text(WORKER)
         res = {}
         for fmu in ("g.fmu", "NullFmu.fmu"):
-            for importer in ("fmpy", "fmpy-angles", "libcosimpy"):
+            for importer in IMPORTERS:
+                env = {**os.environ, "LD_LIBRARY_PATH": str(Path(sys.prefix) / "lib")}  # ecospy's tbb
                 out = subprocess.run([sys.executable, str(d / "worker.py"), str(d / fmu), importer, str(N_STEPS),
-                                      str(DT)], capture_output=True, text=True, check=True).stdout
+                                      str(DT)], capture_output=True, text=True, check=True, env=env).stdout
                 res[(fmu, importer)] = json.loads(out.split("JSON:")[1].splitlines()[0])
     core = core_cost()
     print(f"raw core Solver.advance(1 ms), default scene, pick-and-place-like input: {core * 1e6:8.1f} µs/step")
-    for importer in ("fmpy", "fmpy-angles", "libcosimpy"):
+    for importer in IMPORTERS:
         g, null = res[("g.fmu", importer)], res[("NullFmu.fmu", importer)]
         print(f"{importer:<12} grapefmu FMU {g * 1e6:8.1f} µs/step, null FMU {null * 1e6:6.1f} µs/step, "
               f"wrapper overhead {1e6 * (g - null - core):6.1f} µs/step")

@@ -6,12 +6,13 @@ through `grapefmu_refuse(status, message)`, which logs the message and makes the
 return that status; the slave's values and state stay as they were."""
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 from grapefmu import GrapefmuError, __version__
 from grapefmu.solver.warmup import notice
 
-from .core import FmuCore
+from .core import INPUT_BOUNDS, FmuCore
 from .report import stderr_refuse, refuse_function
 
 OK, WARNING, DISCARD, ERROR, FATAL = range(5)  # fmi2Status and fmi3Status share these codes
@@ -68,6 +69,23 @@ class GrapeSlaveMixin:
                                                   tolerance=sv.rtol)
         self.phase = "instantiated"  # -> "initialization" -> "step"
 
+    @functools.cached_property
+    def _getters(self) -> dict:
+        """{variable class: {value reference: getter}} of every variable."""
+        out: dict = {kind: {} for kind in self.ACCESS.values()}
+        for vr, var in self.vars.items():
+            out[type(var)][vr] = var.getter
+        return out
+
+    @functools.cached_property
+    def _inputs(self) -> dict:
+        """{variable class: {value reference: (name, largest magnitude)}} of the real inputs, for _set's fast path."""
+        out: dict = {}
+        for vr, var in self.vars.items():
+            if var.causality.name == "input" and var.name in INPUT_BOUNDS:
+                out.setdefault(type(var), {})[vr] = (var.name, INPUT_BOUNDS[var.name])
+        return out
+
     def _register(self, var) -> None:
         kw = {"description": var.description, **self._accessors(var), **self.KINDS[var.causality, var.type == "real"]}
         if self.UNITS and var.type == "real" and var.unit not in ("", "1"):
@@ -103,6 +121,11 @@ class GrapeSlaveMixin:
         return var
 
     def _get(self, vrs, kind) -> list:
+        try:  # every reference readable as this kind: the common call, one dictionary lookup each
+            getters = self._getters[kind]
+            return [getters[vr]() for vr in vrs]
+        except KeyError:
+            pass
         out = []
         for vr in vrs:
             var = self._variable(vr, kind, False)
@@ -110,6 +133,18 @@ class GrapeSlaveMixin:
         return out
 
     def _set(self, vrs, values, kind) -> None:
+        inputs = self._inputs.get(kind, {})
+        try:  # finite floats within range on inputs: the common call, checked inline
+            for vr, x in zip(vrs, values, strict=True):
+                name, bound = inputs[vr]
+                if not (type(x) is float and -bound <= x <= bound):
+                    break
+            else:
+                for vr, x in zip(vrs, values):
+                    self.core.values[inputs[vr][0]] = x
+                return
+        except (KeyError, ValueError):
+            pass
         if len(vrs) != len(values):
             self._refuse(f"set{kind.__name__}: {len(vrs)} value references but {len(values)} values")
             return

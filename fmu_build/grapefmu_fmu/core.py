@@ -26,6 +26,7 @@ from .variables import OUTPUT_SETS, Var, default_outputs, variables
 
 OUTPUTS_FILE = "outputs.txt"  # in the resources next to the scene: "full" or "summary"
 INPUTS = ("base_ax", "base_az")
+INPUT_BOUNDS = {name: MAX_ACCEL for name in INPUTS}  # the largest magnitude each input takes, m/s²
 DISCARD, ERROR = 2, 3  # FMI 2 and 3 status codes
 #: solver steps one communication step may take: beyond this the step is refused (Discard) in bounded time
 STEP_BUDGET = 100_000
@@ -51,8 +52,9 @@ class FmuCore:
             if v.channel is not None and v.causality == "output":
                 plan.setdefault(v.channel.name, (v.channel, []))[1].append((v.name, v.element, cast[v.type]))
         self._channel_of = {name: plan[c.name] for c, targets in plan.values() for name, _, _ in targets}
-        self._fresh: set[str] = set()  # outputs already evaluated on the current state
-        self._snap = None              # the current state's snapshot, made when an output is first read
+        self._fresh: dict[str, float | int | bool] = {}  # outputs already evaluated on the current state
+        self._snap = None  # the solver's snapshot, refreshed when an output is first read after a step
+        self._views: dict[str, np.ndarray] = {}  # channels whose value is a view on the state (_use)
         self.values: dict[str, float | int | bool] = self._start_values()
         self.solver: Solver | None = None
         self.error: str | None = None
@@ -134,11 +136,10 @@ class FmuCore:
         try:
             self.scene = self.scene_from_parameters()
             self.start_time = start_time
-            self.solver = Solver(self.scene, t_start=start_time, max_steps=STEP_BUDGET)
+            self._use(Solver(self.scene, t_start=start_time, max_steps=STEP_BUDGET))
             self.error = None
-            self._stale()
         except GrapefmuError as e:
-            self.solver = None
+            self._use(None)
             self.error = f"initialization refused: {e}"
         return self.error
 
@@ -159,7 +160,7 @@ class FmuCore:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
         if not ok:
             return f"{name} = {value!r}: expected a finite {kind.__name__}; value refused"
-        if name in INPUTS and abs(value) > MAX_ACCEL:
+        if name in INPUT_BOUNDS and abs(value) > INPUT_BOUNDS[name]:
             return f"input {name} = {value!r}: expected an acceleration within ±{MAX_ACCEL:g} m/s²; value refused"
         return None
 
@@ -173,28 +174,46 @@ class FmuCore:
         if abs(t - self.solver.t) > 1e-9 * max(1.0, abs(t)):
             return ERROR, f"currentCommunicationPoint {t!r} s does not continue from the FMU's time {self.solver.t!r} s"
         try:
-            self.solver.advance(dt, tuple(float(self.values[name]) for name in INPUTS))
+            self.solver.advance(dt, tuple(map(self.values.__getitem__, INPUTS)))
         except GrapefmuError as e:
             return DISCARD, f"step [{t:.9g}, {t + dt:.9g}] s not taken, the FMU keeps its state: {e}"
         self.solver.take_impacts()  # the totals count them; keep the list of finished impacts from growing
         self._stale()
         return None
 
+    def _use(self, solver: Solver | None) -> None:
+        """Step `solver` from now on. A channel whose value is a view on the solver's state vector (angles,
+        rates) is current after every step without a snapshot: it is kept and read directly."""
+        self.solver = solver
+        self._views = {}
+        if solver is not None:
+            snap = solver.snapshot()
+            for channel, _ in self._channel_of.values():
+                v = channel.value(snap)
+                if isinstance(v, np.ndarray) and np.shares_memory(v, solver.state.physical.y):
+                    self._views[channel.name] = v
+        self._stale()
+
     def _stale(self) -> None:
-        self._fresh.clear()
+        self._fresh = {}
         self._snap = None
 
     def output(self, name: str):
         """An output's value on the current state. Outputs are evaluated when first read after a step, one
         catalogue channel at a time on one snapshot, so a master that reads a few pays for a few."""
-        if name not in self._fresh and self.solver is not None:
-            channel, targets = self._channel_of[name]
+        if name in self._fresh:
+            return self._fresh[name]
+        if self.solver is None:
+            return self.values[name]
+        channel, targets = self._channel_of[name]
+        v = self._views.get(channel.name)
+        if v is None:
             if self._snap is None:
                 self._snap = self.solver.snapshot()
-            v = np.asarray(channel.value(self._snap))[0]
-            for target, k, cast in targets:
-                self.values[target] = cast(v[k] if v.ndim else v)
-                self._fresh.add(target)
+            v = channel.value(self._snap)
+        v = np.asarray(v)[0].tolist()
+        for target, k, cast in targets:
+            self._fresh[target] = self.values[target] = cast(v[k] if type(v) is list else v)
         return self.values[name]
 
     # --- FMU state --------------------------------------------------------------------------------
@@ -215,11 +234,10 @@ class FmuCore:
         if state["solver"] is not None:
             solver = solver or Solver(self.scene_from_parameters(), max_steps=STEP_BUDGET)
             solver.set_state(state["solver"])  # refuses before anything changes
-        self.solver = solver if state["solver"] is not None else None
+        self._use(solver if state["solver"] is not None else None)
         self.values.clear()  # in place: the FMI variables' getters and setters hold this dict
         self.values.update(values)
         self.error = state["error"]
-        self._stale()
 
     @staticmethod
     def state_to_bytes(state: dict) -> bytes:

@@ -8,6 +8,7 @@ Either way every interval integrated is recorded as `rachis/accel_applied` (stam
 is what `grapefmu replay --check` needs to reproduce the run exactly."""
 from __future__ import annotations
 
+import collections
 import math
 import time
 
@@ -115,6 +116,7 @@ class SimulatorNode(Node):
         self.paused = False
         self.rejected = 0
         self.overruns = 0
+        self.tick_costs = collections.deque(maxlen=1000)  # s: the last ticks' wall time (diagnostics' percentiles)
         self.failures = 0
         self._reset_sim()
         if self.mode == "realtime":
@@ -277,6 +279,7 @@ class SimulatorNode(Node):
         # whole nanoseconds, so the interval can be recomputed bit for bit from the recorded stamps
         target = seconds(to_ns(self.sim0 + (now - self.wall0) * self.get_parameter("real_time_factor").value))
         self.advance(target - self.solver.t)
+        self.tick_costs.append(time.monotonic() - now)
 
     # --- services -------------------------------------------------------------------------------
     def on_reset(self, _req, resp):
@@ -308,6 +311,8 @@ class SimulatorNode(Node):
             "rejected_inputs": self.rejected, "refused_steps": self.failures, **summary,
             "zeno_guard_activations": self.solver.stats["zeno_guard_activations"], "paused": self.paused,
             "mode": self.mode,
+            **({f"tick_cost_ms_{k}": f"{1e3 * v:.3f}" for k, v in
+                zip(("p50", "p99", "max"), np.percentile(self.tick_costs, [50, 99, 100]))} if self.tick_costs else {}),
         }
         warn = detach or bruising or self.rejected or self.failures
         level = 2 if self.failures else (1 if warn else 0)

@@ -12,7 +12,7 @@ import operator
 import os
 from pathlib import Path
 from functools import cache
-from typing import IO, Any, Mapping
+from typing import IO, Any, Callable, Mapping
 
 import numpy as np
 from mcap.writer import CompressionType, Writer
@@ -44,49 +44,64 @@ def _dtype(desc) -> np.dtype | None:
     return np.dtype(_DTYPES.get(sub[1][0], sub[1][0])).newbyteorder("<")
 
 
-def _default(desc) -> Any:
-    """The ROS default of a field (zero, empty string, empty or zero-filled array, default sub-message)."""
+@cache
+def _default_maker(desc) -> Callable[[], Any]:
+    """A function returning a fresh default of the field (arrays and sub-messages are mutable: one each)."""
     kind, detail = desc
     if kind == Nodetype.BASE:
         name = detail[0]
-        return "" if name in ("string", "wstring") else False if name == "bool" else 0.0 if "float" in name else 0
+        value = "" if name in ("string", "wstring") else False if name == "bool" else 0.0 if "float" in name else 0
+        return lambda: value
     if kind == Nodetype.NAME:
-        return msg(detail)
+        return lambda: msg(detail)
     size = detail[1] if kind == Nodetype.ARRAY else 0
     dt = _dtype(desc)
-    return np.zeros(size, dt) if dt is not None else [_default(detail[0]) for _ in range(size)]
+    if dt is not None:
+        return lambda: np.zeros(size, dt)
+    sub = _default_maker(detail[0])
+    return lambda: [sub() for _ in range(size)]
 
 
-def _coerce(desc, value) -> Any:
-    """Accept plain Python values: dicts for sub-messages, any sequence, array or bytes for numeric arrays."""
-    kind, detail = desc
-    if kind == Nodetype.NAME:
-        return msg(detail, **value) if isinstance(value, dict) else value
-    if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
-        if (dt := _dtype(desc)) is None:
-            return [_coerce(detail[0], v) for v in value]
+def _numeric_array(dt: np.dtype) -> Callable[[Any], np.ndarray]:
+    def coerce(value):
         if isinstance(value, (bytes, bytearray, memoryview)):  # uint8[] data such as MeshFile.data
             value = np.frombuffer(value, np.uint8)
         return np.ascontiguousarray(value, dt)
+    return coerce
+
+
+@cache
+def _coercer(desc) -> Callable[[Any], Any]:
+    """The conversion of one field's value, chosen once per field descriptor (a node builds ~10 messages a tick):
+    plain Python values are accepted, dicts for sub-messages, any sequence, array or bytes for numeric arrays."""
+    kind, detail = desc
+    if kind == Nodetype.NAME:
+        return lambda value: msg(detail, **value) if isinstance(value, dict) else value
+    if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+        if (dt := _dtype(desc)) is not None:
+            return _numeric_array(dt)
+        sub = _coercer(detail[0])
+        return lambda value: [sub(v) for v in value]
     name = detail[0]  # scalar: store the Python type that deserialization returns, refuse 1.5 for an integer
-    return value if name in ("string", "wstring") else bool(value) if name == "bool" else \
-        float(value) if "float" in name else operator.index(value)
+    return str if name in ("string", "wstring") else bool if name == "bool" else \
+        float if "float" in name else operator.index
 
 
 @cache
 def _fields(typename: str):
+    """(class, [(name, coerce, default)], field names) of a message type."""
     fdefs = TYPESTORE.fielddefs[typename][1]
-    return fdefs, frozenset(name for name, _ in fdefs)
+    return (TYPESTORE.types[typename], [(name, _coercer(desc), _default_maker(desc)) for name, desc in fdefs],
+            frozenset(name for name, _ in fdefs))
 
 
 def msg(typename: str, **fields) -> Any:
     """A `typename` message (e.g. "sensor_msgs/msg/JointState") from TYPESTORE. Omitted fields get their ROS
     default, because rosbags' dataclasses have no defaults. Sub-messages may be given as dicts."""
-    fdefs, names = _fields(typename)
-    if unknown := fields.keys() - names:
-        raise RecordingError(f"{typename} has no field(s) {sorted(unknown)}")
-    return TYPESTORE.types[typename](**{name: _coerce(desc, fields[name]) if name in fields else _default(desc)
-                                        for name, desc in fdefs})
+    cls, plan, names = _fields(typename)
+    if not names.issuperset(fields):
+        raise RecordingError(f"{typename} has no field(s) {sorted(fields.keys() - names)}")
+    return cls(**{name: coerce(fields[name]) if name in fields else default() for name, coerce, default in plan})
 
 
 def stamp(ns: int) -> Any:

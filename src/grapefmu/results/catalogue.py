@@ -103,12 +103,12 @@ def _peak(field: str, now: Callable[[Snapshot], np.ndarray]) -> Callable[[Snapsh
 
 
 def _largest(values: Callable[[Snapshot], np.ndarray]) -> Callable[[Snapshot], np.ndarray]:
-    return lambda s: values(s).max(axis=1, initial=0.0)
+    return lambda s: np.maximum.reduce(values(s), axis=1, initial=0.0)
 
 
 def dissipated(s: Snapshot) -> np.ndarray:
     """Energy dissipated so far by hinges, couplings and contacts (J)."""
-    return s.ledger[:, :3].sum(axis=1)
+    return np.add.reduce(s.ledger[:, :3], axis=1)
 
 
 def stored(s: Snapshot) -> np.ndarray:
@@ -123,7 +123,7 @@ def _balance(s: Snapshot) -> np.ndarray:
 
 _force = lambda s: s.observation.contact_force  # noqa: E731
 _tension = lambda s: s.observation.pedicel_tension  # noqa: E731
-_max_tension = lambda s: _tension(s).max(axis=1)  # noqa: E731
+_max_tension = lambda s: np.maximum.reduce(_tension(s), axis=1)  # noqa: E731
 
 CHANNELS: tuple[Channel, ...] = (
     Channel("angle", "rad", "angle", "real", "Twig angle (0 hanging; swing and tilt for a spherical twig)",

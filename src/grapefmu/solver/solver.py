@@ -19,14 +19,14 @@ from ..model.contact import HC_MIN_APPROACH_SPEED, Law
 from ..model.model import Scene
 from ..physics import observe as obs
 from ..physics.compiled import jit
-from ..physics.dynamics import rhs
 from ..physics.excitation import INPUT, base_accel
 from ..physics.kinematics import kinematics, workspace
-from ..physics.layout import layout, ledger
+from ..physics.layout import LEDGER_TERMS, layout, ledger
 from ..results import catalogue
 from ..results.impacts import Impacts
 from ..results.records import concat
 from ..results.run import Run
+from . import session as ses
 from . import state as st
 from .broadphase import rebuild
 from .events import classify, open_impact
@@ -63,14 +63,7 @@ def _start(S, M, X, skin):
     kinematics(S.physical.y, M, W.berry)
     rebuild(M, C, S.book, S.broad_phase, W.berry, skin)
     S.book.counters[0].near_list_rebuilds = 0
-    _derivative(S, M, X)
-
-
-@jit
-def _derivative(S, M, X):
-    t = S.physical.t[0]
-    rhs(t, t, S.physical.y, S.integrator.f, S.physical.contacts, M, X, S.input[0], workspace(M), S.broad_phase.near,
-        S.broad_phase.count[0])
+    ses.derivative(S, M, X)
 
 
 class Solver:
@@ -103,8 +96,18 @@ class Solver:
                           s.contact_location == "step-control" and self.method == "event", th.bruise_force,
                           th.bruise_energy, th.detachment_force)
         self._closed: list[np.ndarray] = []
-        self.state = self._fresh_state(scene.initial_state, s.zeno_max_events, float(t_start))
+        fresh = self._fresh_state(scene.initial_state, s.zeno_max_events, float(t_start))
+        self._memory, self.state = st.pack(fresh)  # the state's arrays live in _memory from now on
+        self._backup = np.zeros_like(self._memory)
         self._scratch = st.recorder(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
+        m, lay, y = self.model, self.layout, self.state.physical.y
+        now = (obs.empty(1, m.n_berries, m.n_dof, len(m.pairs)), np.zeros((1, 2)), np.zeros((1, len(m.pairs)), bool))
+        self._session = ses.new(self.M, self.excitation, self.tableau, self.config, self.state, self._scratch,
+                                self._memory, self._backup, now)
+        observation, accel, in_contact = now
+        self._snapshot = catalogue.Snapshot(self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel,
+                                            y[None, lay.base], np.zeros((1, len(LEDGER_TERMS))),
+                                            self.state.book.totals, observation)
 
     # --- state -----------------------------------------------------------------------------------
     def _fresh_state(self, x0: np.ndarray, zeno_max: int, t_start: float) -> st.SolverState:
@@ -148,7 +151,7 @@ class Solver:
         """Restore a state from get_state of a solver of the same scene and method; anything else, or a
         corrupted state, is refused with a StateError naming the field, and the solver keeps its own."""
         st.check(state, self.state, self.excitation.breaks.shape[0])
-        self.state = st.adopt(state, self.state)
+        st.assign(self.state, state)
 
     @property
     def t(self) -> float:
@@ -204,12 +207,14 @@ class Solver:
         return out
 
     def snapshot(self) -> catalogue.Snapshot:
-        """The current state as a one-sample Snapshot: what the catalogue's channels are computed from."""
-        y, C = self.state.physical.y, self.state.physical.contacts
-        lay = self.layout
-        return catalogue.Snapshot(np.array([self.t]), y[None, lay.q], y[None, lay.w], (C["mode"] != 0)[None, :],
-                                  np.array([self.base_accel]), y[None, lay.base], ledger(lay, y)[None, :],
-                                  self.totals(), self.observe())
+        """The current state as a one-sample Snapshot: what the catalogue's channels are computed from.
+
+        Its arrays are the solver's own (views on the state and buffers refreshed here, like MuJoCo's mjData
+        after mj_forward): read them before the next step, copy what you keep. A face pays one compiled call."""
+        ses.refresh(self._session)
+        snap = self._snapshot
+        ledger(self.layout, self.state.physical.y, out=snap.ledger[0])
+        return snap
 
     def totals(self) -> np.ndarray:
         """What the run has done to the berries so far (state.TOTALS), a copy."""
@@ -228,10 +233,10 @@ class Solver:
 
     def step(self) -> float:
         """Take one accepted step (it may end early at a contact switch or breakpoint); return the new time."""
-        before = st.copy(self.state)
+        self._save()
         status = self._integrate(math.inf, self._scratch, 1)
         if status not in (DONE, MAX_STEPS):
-            self._fail(status, before)
+            self._fail(status)
         self._closed_into(self._scratch)
         return self.t
 
@@ -255,37 +260,31 @@ class Solver:
     def advance(self, dt: float, base_accel: tuple[float, float] | None = None) -> None:
         """Integrate exactly dt seconds. With base_accel = (a_x, a_z) the rachis acceleration is held at
         that value over the interval (zero-order hold, as an FMU input or a ROS message gives it);
-        without it the scene's excitation is used. On failure the state is left unchanged."""
-        try:
-            ok = not isinstance(dt, bool) and isinstance(dt, (int, float)) and math.isfinite(float(dt)) and dt > 0
-        except OverflowError:
-            ok = False
-        if not ok:
-            raise SolverError(f"dt: expected a finite step > 0 s, got {dt!r}")
-        dt = float(dt)
-        held = None
-        if base_accel is not None:
-            try:
-                ax, az = (float(v) for v in base_accel)
-            except (TypeError, ValueError):
-                raise SolverError(f"base_accel: expected two numbers (a_x, a_z) in m/s², got {base_accel!r}") from None
-            if not (math.isfinite(ax) and math.isfinite(az) and abs(ax) <= MAX_ACCEL and abs(az) <= MAX_ACCEL):
-                raise SolverError(f"base_accel: expected finite values within ±{MAX_ACCEL:g} m/s², got ({ax!r}, {az!r})")
-            held = (ax, az)
-        before = st.copy(self.state)
-        if held != self.held_input:
-            self.state.input[0] = (held is not None, *(held or (0.0, 0.0)))
-            _derivative(self.state, self.M, self.excitation)
-        t_target = self.t + dt
+        without it the scene's excitation is used. On failure the state is left unchanged.
+
+        The common call (a float step, a tuple of two floats) is checked inline and goes to the compiled
+        side as one Session: a face's step costs about 1 µs more than its physics (docs/benchmarks.md)."""
+        if type(dt) is not float or not 0.0 < dt < math.inf:
+            dt = _step_size(dt)
+        if base_accel is None:
+            held, ax, az = False, 0.0, 0.0
+        else:
+            held = True
+            if type(base_accel) is tuple and len(base_accel) == 2:
+                ax, az = base_accel
+            if not (type(base_accel) is tuple and len(base_accel) == 2 and type(ax) is float and type(az) is float
+                    and -MAX_ACCEL <= ax <= MAX_ACCEL and -MAX_ACCEL <= az <= MAX_ACCEL):
+                ax, az = _held_accel(base_accel)
         kept = len(self._closed)
-        while True:
-            status = self._integrate(t_target, self._scratch, self.max_steps)
+        status, t_target, n_impacts = ses.advance(self._session, dt, held, ax, az, self.max_steps)
+        while n_impacts:
             self._closed_into(self._scratch)
             if status != IMPACTS_FULL:
                 break
+            status, t_target, n_impacts = ses.resume(self._session, t_target, self.max_steps)
         if status != DONE:
             del self._closed[kept:]
-            self._fail(status, before)
+            self._fail(status)
 
     def take_impacts(self) -> Impacts:
         """Impacts that ended since the last call (during step() or advance()), oldest first."""
@@ -294,9 +293,13 @@ class Solver:
         rows, self._closed = self._closed, []
         return Impacts.from_records(concat(rows))
 
-    def _fail(self, status: int, before: st.SolverState) -> None:
+    def _save(self) -> None:
+        self._backup[:] = self._memory
+
+    def _fail(self, status: int) -> None:
+        """Restore the state saved before the call that failed and say why."""
         t = self.t
-        self.state = before
+        self._memory[:] = self._backup
         raise SolverError(f"integration stopped at t = {t:.9g} s: {STATUS_TEXT.get(status, f'status {status}')}; "
                           f"the state is left at t = {self.t:.9g} s")
 
@@ -307,7 +310,7 @@ class Solver:
         s = self.scene.solver
         t_end = s.t_end if t_end is None else float(t_end)
         dt_out = s.output_interval if output_interval is None else float(output_interval)
-        before = st.copy(self.state)
+        self._save()
         npair = len(self.model.pairs)
         n_expected = int(math.floor((t_end - self.t) / dt_out + 1e-9)) + 1
         rec = st.recorder(n_expected + 1, self.layout.size, npair, max(npair, 1) * 256)
@@ -337,7 +340,7 @@ class Solver:
                     continue
             break
         if status != DONE:
-            self._fail(status, before)
+            self._fail(status)
         wall = time.perf_counter() - wall
         if progress:
             progress(self.t, t_end)
@@ -362,3 +365,25 @@ class Solver:
         rows["impulse"] = bp["impulse"] - bp["impulse_at_onset"]
         rows["dissipated"] = bp["dissipated"] - bp["dissipated_at_onset"]
         return rows
+
+
+def _step_size(dt) -> float:
+    """dt as a float, or a SolverError: the checks behind advance's inline one, with the message."""
+    try:
+        ok = not isinstance(dt, bool) and isinstance(dt, (int, float)) and math.isfinite(float(dt)) and dt > 0
+    except OverflowError:
+        ok = False
+    if not ok:
+        raise SolverError(f"dt: expected a finite step > 0 s, got {dt!r}")
+    return float(dt)
+
+
+def _held_accel(base_accel) -> tuple[float, float]:
+    """(a_x, a_z) as floats, or a SolverError naming what is wrong."""
+    try:
+        ax, az = (float(v) for v in base_accel)
+    except (TypeError, ValueError):
+        raise SolverError(f"base_accel: expected two numbers (a_x, a_z) in m/s², got {base_accel!r}") from None
+    if not (math.isfinite(ax) and math.isfinite(az) and abs(ax) <= MAX_ACCEL and abs(az) <= MAX_ACCEL):
+        raise SolverError(f"base_accel: expected finite values within ±{MAX_ACCEL:g} m/s², got ({ax!r}, {az!r})")
+    return ax, az

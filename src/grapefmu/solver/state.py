@@ -15,7 +15,8 @@ from ..physics.forces import CONTACT
 from ..results.records import IMPACT, TOTALS
 
 __all__ = ["BOOK_COUNTERS", "BOOK_PAIR", "CONFIG", "CONTACT", "IMPACT", "INPUT", "TOTALS", "Book", "BroadPhase",
-           "Integrator", "Physical", "Recorder", "SolverState", "copy", "flatten", "recorder", "unflatten"]
+           "Integrator", "Physical", "Recorder", "SolverState", "assign", "copy", "flatten", "pack", "recorder",
+           "unflatten"]
 
 #: the solver's settings as the compiled core reads them
 CONFIG = np.dtype([("rtol", "f8"), ("atol", "f8"), ("fixed_step", "f8"), ("zeno_window", "f8"), ("locate", "?"),
@@ -141,12 +142,33 @@ def copy(state: SolverState) -> SolverState:
         BroadPhase(B.near.copy(), B.count.copy(), B.reference.copy()), state.fingerprint.copy())
 
 
-def adopt(state: SolverState, template: SolverState) -> SolverState:
-    """A copy of a checked `state` in the template's own dtypes: a record array read back from bytes has lost
-    its aligned flag, and the compiled core would otherwise be specialised (and fail) for it."""
-    want = flatten(template)
-    return unflatten({k: np.frombuffer(bytearray(a.tobytes()), want[k].dtype).reshape(a.shape) if a.dtype.names
-                      else a.astype(want[k].dtype) for k, a in flatten(state).items()})
+def pack(state: SolverState) -> tuple[np.ndarray, SolverState]:
+    """The state copied into one byte buffer, and the state as views on it (each array 16-byte aligned):
+    saving the state before a step and restoring it after a failure are then one copy of the buffer."""
+    leaves = flatten(state)
+    offsets, size = {}, 0
+    for name, a in leaves.items():
+        size = -(-size // 16) * 16
+        offsets[name] = size
+        size += a.nbytes
+    memory = np.zeros(size // 8 + 2, np.uint64)  # in words, so that a copy moves 8 bytes at a time; + 2: an
+    # empty array may sit at the very end
+    views = {name: np.ndarray(a.shape, a.dtype, buffer=memory, offset=offsets[name]) for name, a in leaves.items()}
+    packed = unflatten(views)
+    assign(packed, state)
+    return memory, packed
+
+
+def _bytes(a: np.ndarray) -> np.ndarray:
+    return a.reshape(-1).view(np.uint8)
+
+
+def assign(target: SolverState, state: SolverState) -> None:
+    """Copy a checked `state` into `target`'s arrays, in place and byte for byte (a record array read back from
+    bytes may have lost its aligned flag: its bytes are still the same)."""
+    source = flatten(state)
+    for name, a in flatten(target).items():
+        _bytes(a)[:] = np.frombuffer(np.ascontiguousarray(source[name]).tobytes(), np.uint8)
 
 
 def _fields(a: np.ndarray):

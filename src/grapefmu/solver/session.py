@@ -1,0 +1,105 @@
+"""One compiled object per solver, so that a face's step pays for physics, not for the call.
+
+Calling a compiled function costs numba about 0.2 µs per array it unboxes; the model, excitation,
+tableau, state and scratch recorder are about forty arrays. A `Session` (a numba StructRef) holds them
+all once, and `advance` takes it as a single argument. The state's arrays are views on one byte buffer
+(state.pack), so saving it before a step and restoring it after a failure are one copy each.
+"""
+from __future__ import annotations
+
+from numba.core import types
+from numba.experimental import structref
+from numba.extending import overload
+
+from ..physics.compiled import jit
+from ..physics.dynamics import rhs
+from ..physics.excitation import applied_accel
+from ..physics.kinematics import workspace
+from ..physics.observe import observe
+from .loop import integrate
+
+__all__ = ["Session", "advance", "derivative", "new", "refresh", "resume"]
+
+
+@structref.register
+class SessionType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(t)) for name, t in fields)
+
+
+class Session(structref.StructRefProxy):
+    """The compiled side of a Solver: model, excitation, tableau, settings, state, scratch recorder and the
+    state's byte buffer with its backup (fields as `new` names them)."""
+
+
+structref.define_boxing(SessionType, Session)
+
+
+def _new(model, excitation, tableau, config, state, scratch, memory, backup, now):
+    raise NotImplementedError  # compiled only (the overload below)
+
+
+@overload(_new)
+def _new_impl(model, excitation, tableau, config, state, scratch, memory, backup, now):
+    kind = SessionType([("model", model), ("excitation", excitation), ("tableau", tableau), ("config", config),
+                        ("state", state), ("scratch", scratch), ("memory", memory), ("backup", backup),
+                        ("now", now)])
+
+    def impl(model, excitation, tableau, config, state, scratch, memory, backup, now):
+        s = structref.new(kind)
+        s.model, s.excitation, s.tableau, s.config = model, excitation, tableau, config
+        s.state, s.scratch, s.memory, s.backup, s.now = state, scratch, memory, backup, now
+        return s
+
+    return impl
+
+
+@jit
+def new(model, excitation, tableau, config, state, scratch, memory, backup, now):
+    """A Session over these arrays (shared, not copied: the Solver keeps its numpy views of them). `now` is
+    (Observation, accel (1, 2), in_contact (1, P)) of one sample: what `refresh` fills."""
+    return _new(model, excitation, tableau, config, state, scratch, memory, backup, now)
+
+
+@jit
+def derivative(S, M, X):
+    """dy/dt at the current state into the integrator's memory (after the input or the modes changed)."""
+    t = S.physical.t[0]
+    rhs(t, t, S.physical.y, S.integrator.f, S.physical.contacts, M, X, S.input[0], workspace(M), S.broad_phase.near,
+        S.broad_phase.count[0])
+
+
+@jit
+def advance(s, dt, held, ax, az, max_steps):
+    """Save the state, hold the input (held, ax, az), integrate dt. Returns (status, t_target, finished impacts
+    in the scratch recorder); the caller restores the state (memory <- backup) if the status is a failure."""
+    s.backup[:] = s.memory
+    S = s.state
+    inp = S.input[0]
+    if inp.held != held or inp.ax != ax or inp.az != az:
+        inp.held, inp.ax, inp.az = held, ax, az
+        derivative(S, s.model, s.excitation)
+    t_target = S.physical.t[0] + dt
+    status = integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, t_target, max_steps)
+    return status, t_target, s.scratch.cursor[0].n_impacts
+
+
+@jit
+def refresh(s):
+    """What the current state shows into s.now: the observation, the rachis acceleration acting now and which
+    pairs are in contact (one compiled call per step for a face, whatever it reads)."""
+    S = s.state
+    observation, accel, in_contact = s.now
+    t = S.physical.t[0]
+    accel[0, 0], accel[0, 1] = applied_accel(s.excitation, S.input[0], t, t)
+    C = S.physical.contacts
+    for p in range(C.shape[0]):
+        in_contact[0, p] = C[p].mode != 0
+    observe(S.physical.y.reshape((1, S.physical.y.shape[0])), C.reshape((1, C.shape[0])), accel, s.model, observation)
+
+
+@jit
+def resume(s, t_target, max_steps):
+    """Go on towards t_target after the caller emptied a full impact list. Returns what advance returns."""
+    status = integrate(s.model, s.excitation, s.tableau, s.state, s.config, s.scratch, t_target, max_steps)
+    return status, t_target, s.scratch.cursor[0].n_impacts
