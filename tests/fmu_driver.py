@@ -103,6 +103,16 @@ def run_summary(path, rows, stop, dt):
     return {"rows": out, "variables": len(f.md.modelVariables)}
 
 
+def run_named(path, rows, stop, dt, names):
+    """The named Real outputs after every step of a run."""
+    f = Fmu2(path)
+    out = []
+    for k in range(round(stop / dt)):
+        f.step(dt, *held(rows, k * dt))
+        out.append([(k + 1) * dt] + f.get(names))
+    return {"rows": out}
+
+
 def run_cosim(path, rows, stop, dt):
     from fmpy import read_model_description
     from libcosimpy.CosimExecution import CosimExecution
@@ -231,6 +241,8 @@ def main(argv):
             out = run_fmpy(path, rows, float(argv[3]), float(argv[4]), {k: float(v) for k, v in params.items()})
         elif cmd == "summary":
             out = run_summary(path, rows, float(argv[3]), float(argv[4]))
+        elif cmd == "named":
+            out = run_named(path, rows, float(argv[3]), float(argv[4]), argv[5].split(","))
         elif cmd == "cosim":
             out = run_cosim(path, rows, float(argv[3]), float(argv[4]))
         elif cmd == "ecos":

@@ -102,9 +102,9 @@ def test_one_name_per_concept(pattern):
 def test_names_table_lists_every_catalogue_channel_used_by_the_model():
     from grapefmu.results.catalogue import CHANNELS
     doc = (ROOT / "docs" / "model.md").read_text()
-    names = doc[doc.index("## 7. Names"):doc.index("## 8.")]
+    names = doc[doc.index("## 8. Names"):doc.index("## 9.")]
     for c in CHANNELS:
-        if c.per in ("angle", "berry", "pair"):
+        if c.per in ("angle", "berry", "pair", "obstacle"):
             assert f"`{c.name}" in names, c.name
 
 

@@ -33,7 +33,7 @@ def channel_vars(model: Model, outputs: str = "full") -> list[Var]:
     """The catalogue's FMU channels as variables (per-element channels only in the full set)."""
     out = []
     for c in CHANNELS:
-        if not c.fmu or (c.per != "cluster" and outputs != "full"):
+        if not c.fmu or (c.per not in ("cluster", "obstacle") and outputs != "full"):
             continue
         for k, el in enumerate(c.element_names(model)):
             what = f" ({el.replace('_', ' and ', 1) if c.per == 'pair' else el})" if el else ""
@@ -42,7 +42,8 @@ def channel_vars(model: Model, outputs: str = "full") -> list[Var]:
 
 
 def variables(model: Model, outputs: str = "full") -> list[Var]:
-    law = model.pairs[0].law.kind if model.pairs else "kelvin-voigt"
+    berry_pairs = [p for p in model.pairs if p.j < model.n_berries]  # [contact]; obstacles keep their own laws
+    law = berry_pairs[0].law.kind if berry_pairs else "kelvin-voigt"
     k_unit = "N/m" if law == "kelvin-voigt" else "N/m1.5"
     c_unit = "N.s/m" if law == "kelvin-voigt" else "1"
     v = channel_vars(model, outputs)

@@ -75,8 +75,8 @@ def kelvin_voigt_damping(e: float, stiffness: float, effective_mass: float) -> f
 
 
 def hertz_stiffness(effective_modulus: float, r_i: float, r_j: float) -> float:
-    """K = 4/3 E* √R* for two spheres, R* = r_i r_j / (r_i + r_j)."""
-    r_eff = r_i * r_j / (r_i + r_j)
+    """K = 4/3 E* √R* for two spheres, R* = r_i r_j / (r_i + r_j); a sphere on a plane has r_j = ∞, R* = r_i."""
+    r_eff = r_i if math.isinf(r_j) else r_i * r_j / (r_i + r_j)
     return 4.0 / 3.0 * effective_modulus * math.sqrt(r_eff)
 
 

@@ -44,7 +44,23 @@ class Berry:
 
 
 @dataclass(frozen=True)
+class Obstacle:
+    """A plane fixed in the world (a crate's floor or wall, a conveyor): the side its normal points away
+    from is solid. Berries touching it follow its own contact law and bruise at its own thresholds (padding
+    foam against hard plastic; the laws sit on the berry–obstacle ContactPairs). The world frame is the rachis
+    frame at t = 0 (docs/model.md §7)."""
+
+    name: str
+    point: tuple[float, float, float]   # m, a point of the surface, world frame
+    normal: tuple[float, float, float]  # unit, out of the solid
+    bruise_force: float                 # N, peak force of one impact on this surface that bruises
+    bruise_energy: float                # J, energy dissipated in one impact on this surface that bruises
+
+
+@dataclass(frozen=True)
 class ContactPair:
+    """Berry i and body j: berry j when j < N, else obstacle j − N (one index space for every body)."""
+
     i: int
     j: int
     law: ContactLaw
@@ -68,6 +84,10 @@ BERRY = np.dtype([("mass", "f8"), ("radius", "f8"), ("twig_length", "f8"), ("hin
 #: one candidate contact pair
 PAIR = np.dtype([("i", "i8"), ("j", "i8"), ("law", "i8"), ("stiffness", "f8"), ("damping", "f8"), ("clamp", "?")],
                 align=True)
+#: one obstacle plane n·x = offset (n out of the solid, world frame) with its bruise thresholds; a berry–berry
+#: pair's thresholds are the scene's
+OBSTACLE = np.dtype([("nx", "f8"), ("ny", "f8"), ("nz", "f8"), ("offset", "f8"), ("bruise_force", "f8"),
+                     ("bruise_energy", "f8")], align=True)
 #: one k3/c3 coupling
 COUPLING = np.dtype([("i", "i8"), ("j", "i8"), ("stiffness", "f8"), ("damping", "f8")], align=True)
 
@@ -83,11 +103,14 @@ class ModelArrays(NamedTuple):
       angle's index in q) and n_angles (1 planar, 2 spherical).
     pair (P,) PAIR: berries i < j, law (contact.Law), stiffness k (N/m) or K (N/m^1.5), damping c (N·s/m)
       or χ (hunt-crossley), clamp (the no-tension clamp).
-    coupling (C,) COUPLING: berries i, j, stiffness k3 N/m, damping c3 N·s/m."""
+    coupling (C,) COUPLING: berries i, j, stiffness k3 N/m, damping c3 N·s/m.
+    obstacle (O,) OBSTACLE: the plane n·x = offset (nx, ny, nz out of the solid), bruise_force N,
+      bruise_energy J; a pair whose j ≥ N touches obstacle j − N."""
 
     berry: np.ndarray
     pair: np.ndarray
     coupling: np.ndarray
+    obstacle: np.ndarray
     gravity: float   # m/s²
     n_dof: int       # D: angles in q
 
@@ -99,6 +122,7 @@ class Model:
     couplings: tuple[Coupling, ...] = ()
     gravity: float = 9.81
     pairs_pruned: int = 0   # listed or default pairs dropped because they can never touch
+    obstacles: tuple[Obstacle, ...] = ()
 
     @property
     def n_berries(self) -> int:
@@ -121,9 +145,28 @@ class Model:
     def planar(self) -> bool:
         return not any(b.spherical for b in self.berries)
 
+    @property
+    def body_names(self) -> list[str]:
+        """Every body a contact pair can name: the berries, then the obstacles (ContactPair.j indexes this)."""
+        return self.names + [o.name for o in self.obstacles]
+
     def pair_name(self, p: int) -> str:
         pr = self.pairs[p]
-        return f"{self.berries[pr.i].name}_{self.berries[pr.j].name}"
+        names = self.body_names
+        return f"{names[pr.i]}_{names[pr.j]}"
+
+    def touches_obstacle(self, p: int) -> bool:
+        return self.pairs[p].j >= self.n_berries
+
+    @cached_property
+    def obstacle_pairs(self) -> np.ndarray:
+        """(P, O): 1.0 where pair p is a berry on obstacle o (sums per-pair quantities per obstacle)."""
+        out = np.zeros((len(self.pairs), len(self.obstacles)))
+        for p, pr in enumerate(self.pairs):
+            if pr.j >= self.n_berries:
+                out[p, pr.j - self.n_berries] = 1.0
+        out.flags.writeable = False
+        return out
 
     @cached_property
     def arrays(self) -> ModelArrays:
@@ -135,7 +178,9 @@ class Model:
         pair = np.array([(p.i, p.j, int(p.law.law), p.law.stiffness, p.law.damping, p.law.clamp) for p in self.pairs],
                         dtype=PAIR)
         coupling = np.array([(c.i, c.j, c.stiffness, c.damping) for c in self.couplings], dtype=COUPLING)
-        return ModelArrays(berry, pair, coupling, float(self.gravity), int(dof[-1]))
+        obstacle = np.array([(*o.normal, float(np.dot(o.normal, o.point)), o.bruise_force, o.bruise_energy)
+                             for o in self.obstacles], dtype=OBSTACLE)
+        return ModelArrays(berry, pair, coupling, obstacle, float(self.gravity), int(dof[-1]))
 
     @cached_property
     def dof(self) -> np.ndarray:

@@ -14,6 +14,7 @@ from ..model.excitation import constant
 from .excitation import applied_accel, held
 from .forces import forces, generalized_forces, hinge_torque
 from .kinematics import kinematics, workspace
+from .layout import model_offsets
 
 
 @jit
@@ -32,11 +33,8 @@ def rhs(t, t_ref, y, dy, contacts, M, X, inp, W, pairs, n_pairs):
     npair = M.pair.shape[0]
     ax, az = applied_accel(X, inp, t, t_ref)
     kinematics(y, M, kin)
-    diss = forces(ax, az, contacts, M, W, pairs, n_pairs)
-    o_dh = 2 * nd
-    o_dc = o_dh + n
-    o_w = o_dc + nc + 1
-    work = 0.0
+    diss, work = forces(ax, az, contacts, M, W, pairs, n_pairs)
+    o_bv, o_b, o_dh, o_dc, o_contact, o_w, size = model_offsets(M)
     for i in range(n):
         b, k = berry[i], kin[i]
         o = b.dof
@@ -62,18 +60,18 @@ def rhs(t, t_ref, y, dy, contacts, M, X, inp, W, pairs, n_pairs):
         dy[nd + o + 1] = torque[o + 1] / (inertia * cs * cs) + 2.0 * (ss / cs) * sd * td
     for k in range(nc):
         dy[o_dc + k] = W.coupling_power[k]
-    o_pair = o_w + 5  # the state's size
+    o_pair = size
     if dy.shape[0] == o_pair + 2 * npair:
         dy[o_pair:] = 0.0
         for kk in range(n_pairs):
             dy[o_pair + pairs[kk]] = W.pair[kk].force
             dy[o_pair + npair + pairs[kk]] = W.pair[kk].power
-    dy[o_w - 1] = diss
+    dy[o_contact] = diss
     dy[o_w] = work
-    dy[o_w + 1] = ax
-    dy[o_w + 2] = az
-    dy[o_w + 3] = y[o_w + 1]
-    dy[o_w + 4] = y[o_w + 2]
+    dy[o_bv] = ax
+    dy[o_bv + 1] = az
+    dy[o_b] = y[o_bv]
+    dy[o_b + 1] = y[o_bv + 1]
 
 
 #: the right-hand side inlined into the Runge–Kutta stage loop only: a compiled call passing a dozen

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..model.contact import Law
 from .compiled import inline
-from .kinematics import pair_gap
+from .kinematics import contact_gap
 
 #: the discrete contact state of a pair (part of the physical state)
 CONTACT = np.dtype([("mode", "i8"),      # 0 apart, 1 loaded, 2 overlapping but unloaded
@@ -101,7 +101,8 @@ def forces(ax, az, contacts, M, W, pairs, n_pairs):
     """Stage 2: F_i of every berry into W.berry[i] (fx, fy, fz; needs stage 1 there). Contact is evaluated for
     the first n_pairs entries of `pairs` (every pair that can push must be among them); the k-th one's
     force and dissipation power go to W.pair[k], each coupling's c3 ṡ² to W.coupling_power.
-    Returns the total contact dissipation power."""
+    Returns the total contact dissipation power and the power of the obstacles on the berries as the rachis
+    moves past them (§7: F n·ḃ per berry–obstacle contact, the ledger's share of the base's work)."""
     g = M.gravity
     berry, kin = M.berry, W.berry
     for i in range(berry.shape[0]):
@@ -117,6 +118,8 @@ def forces(ax, az, contacts, M, W, pairs, n_pairs):
         kin[cp.j].fx -= fc
         W.coupling_power[k] = cp.damping * sep_dot * sep_dot
     diss = 0.0
+    work = 0.0
+    nb = berry.shape[0]
     for kk in range(n_pairs):
         p = pairs[kk]
         c = contacts[p]
@@ -126,20 +129,24 @@ def forces(ax, az, contacts, M, W, pairs, n_pairs):
             out.power = 0.0
             continue
         pr = M.pair[p]
-        delta, delta_dot, nx, ny, nz = pair_gap(berry[pr.i], berry[pr.j], kin[pr.i], kin[pr.j])
+        delta, delta_dot, nx, ny, nz = contact_gap(M, pr, kin)
         f, power = pair_force(pr, c, delta, delta_dot)
         out.force = f
         out.power = power
         diss += power
         if f != 0.0:
-            ki, kj = kin[pr.i], kin[pr.j]  # +F n on j, −F n on i
+            ki = kin[pr.i]  # −F n on i, +F n on j (an obstacle takes it)
             ki.fx -= f * nx
             ki.fy -= f * ny
             ki.fz -= f * nz
-            kj.fx += f * nx
-            kj.fy += f * ny
-            kj.fz += f * nz
-    return diss
+            if pr.j < nb:
+                kj = kin[pr.j]
+                kj.fx += f * nx
+                kj.fy += f * ny
+                kj.fz += f * nz
+            else:
+                work += f * (nx * (ki.wvx - ki.vx) + nz * (ki.wvz - ki.vz))  # F n·ḃ
+    return diss, work
 
 
 @inline

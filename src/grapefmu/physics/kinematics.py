@@ -1,5 +1,7 @@
-"""Stage 1, kinematics (docs/model.md §1): twig directions, berry positions and velocities,
-and the gap of a contact pair, each computed once per evaluation into a `Workspace`.
+"""Stage 1, kinematics (docs/model.md §1): twig directions, berry positions and velocities (in the rachis
+frame and in the world frame, which the rachis' displacement b separates), and the gap of a contact pair
+(two berries, or a berry and an obstacle fixed in the world: §7), each computed once per evaluation into a
+`Workspace`.
 
 A planar berry has one angle s (its swing in the x–z plane); a spherical one has swing s and tilt t
 in its twig's own frame, turned by the azimuth ψ about z:
@@ -14,6 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .compiled import inline, jit
+from .layout import model_offsets
 
 #: what stage 1 (and stage 2's force) computes per berry, rachis frame
 KINEMATICS = np.dtype([(f, "f8") for f in (
@@ -22,6 +25,8 @@ KINEMATICS = np.dtype([(f, "f8") for f in (
     "dux", "duy", "duz",                  # u̇, 1/s
     "px", "py", "pz",                     # position p = h + l u, m
     "vx", "vy", "vz",                     # velocity ṗ = l u̇, m/s
+    "wx", "wy", "wz",                     # position in the world frame p + b, m
+    "wvx", "wvy", "wvz",                  # velocity in the world frame ṗ + ḃ, m/s
     "fx", "fy", "fz")],                   # F: every force on the berry but its hinge's, N (stage 2)
     align=True)
 #: what stage 2 computes per evaluated pair
@@ -44,10 +49,11 @@ def workspace(M) -> Workspace:
 
 
 @inline
-def berry_kinematics(b, k, s, sd, t, td):
+def berry_kinematics(b, k, s, sd, t, td, bx, bz, vbx, vbz):
     """§1 for berry b (a BERRY record): trig, u, u̇, p and ṗ into k (a KINEMATICS record) from its swing s,
-    tilt t (ignored for a planar berry: t and ṫ are then any numbers) and their rates. Records and numbers only: an array handed to an
-    inlined function costs two reference counts per call."""
+    tilt t (ignored for a planar berry: t and ṫ are then any numbers) and their rates, and the world frame's
+    p + b, ṗ + ḃ from the rachis displacement (bx, bz) and velocity (vbx, vbz). Records and numbers only: an
+    array handed to an inlined function costs two reference counts per call."""
     ss, cs = math.sin(s), math.cos(s)
     if b.n_angles == 1:
         st, ct = 0.0, 1.0
@@ -66,6 +72,8 @@ def berry_kinematics(b, k, s, sd, t, td):
     l = b.twig_length
     k.px, k.py, k.pz = b.hinge_x + l * ux, b.hinge_y + l * uy, b.hinge_z + l * uz
     k.vx, k.vy, k.vz = l * vx, l * vy, l * vz
+    k.wx, k.wy, k.wz = k.px + bx, k.py, k.pz + bz
+    k.wvx, k.wvy, k.wvz = k.vx + vbx, k.vy, k.vz + vbz
 
 
 @inline
@@ -73,9 +81,11 @@ def kinematics(y, M, kin):
     """Stage 1 for every berry into kin ((N,) KINEMATICS)."""
     berry = M.berry
     nd = M.n_dof
+    o_bv, o_b = model_offsets(M)[:2]
+    vbx, vbz, bx, bz = y[o_bv], y[o_bv + 1], y[o_b], y[o_b + 1]
     for i in range(berry.shape[0]):
         o = berry[i].dof  # a planar berry ignores t: y[o + 1] is then the next angle (y runs on past q̇)
-        berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1])
+        berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1], bx, bz, vbx, vbz)
 
 
 @inline
@@ -98,20 +108,43 @@ def pair_gap(bi, bj, ki, kj):
     return delta, delta_dot, nx, ny, nz
 
 
+@inline
+def plane_gap(b, k, ob):
+    """§7: penetration δ = r − (n·w − d) of berry b (world position w, velocity ẇ in its KINEMATICS k) into
+    the plane n·x = d of obstacle ob (an OBSTACLE record, n out of the solid), its rate δ̇ = −n·ẇ, and the
+    normal from the berry toward the obstacle, −n (so the pair's rule "−F n on its first body" pushes out)."""
+    delta = b.radius - (ob.nx * k.wx + ob.ny * k.wy + ob.nz * k.wz - ob.offset)
+    delta_dot = -(ob.nx * k.wvx + ob.ny * k.wvy + ob.nz * k.wvz)
+    return delta, delta_dot, -ob.nx, -ob.ny, -ob.nz
+
+
+@inline
+def contact_gap(M, pr, kin):
+    """(δ, δ̇, n) of contact pair pr (a PAIR record) from stage 1 in kin: its body j is a berry (j < N) or
+    obstacle j − N."""
+    nb = M.berry.shape[0]
+    if pr.j < nb:
+        return pair_gap(M.berry[pr.i], M.berry[pr.j], kin[pr.i], kin[pr.j])
+    return plane_gap(M.berry[pr.i], kin[pr.i], M.obstacle[pr.j - nb])
+
+
 @jit
 def pair_state(y, M, pr, kin):
     """Stage 1 for one pair alone (the event search's root finding needs no other berry), then its gap."""
     berry = M.berry
     nd = M.n_dof
+    o_bv, o_b = model_offsets(M)[:2]
+    vbx, vbz, bx, bz = y[o_bv], y[o_bv + 1], y[o_b], y[o_b + 1]
     for i in (pr.i, pr.j):
-        o = berry[i].dof
-        berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1])
-    return pair_gap(berry[pr.i], berry[pr.j], kin[pr.i], kin[pr.j])
+        if i < berry.shape[0]:
+            o = berry[i].dof
+            berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1], bx, bz, vbx, vbz)
+    return contact_gap(M, pr, kin)
 
 
 def _padded(y, M):
-    """y = [q | q̇] (or longer) padded so that a planar berry's unused tilt reads stay inside it."""
-    out = np.zeros(max(len(y), 2 * M.n_dof + 2))
+    """y = [q | q̇] (or longer) padded with a resting rachis at the origin (world frame = rachis frame)."""
+    out = np.zeros(max(len(y), 2 * M.n_dof + 4))
     out[: len(y)] = y
     return out
 
@@ -139,5 +172,4 @@ def _penetrations(y, M, out):
     kin = np.zeros(M.berry.shape[0], dtype=KINEMATICS)
     kinematics(y, M, kin)
     for p in range(M.pair.shape[0]):
-        pr = M.pair[p]
-        out[p] = pair_gap(M.berry[pr.i], M.berry[pr.j], kin[pr.i], kin[pr.j])[0]
+        out[p] = contact_gap(M, M.pair[p], kin)[0]

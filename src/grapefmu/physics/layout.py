@@ -1,9 +1,11 @@
 """Where each quantity sits in the state vector y.
 
-y = [q (D) | q̇ (D) | hinge dissipation (N) | coupling dissipation (C) | contact dissipation (1)
-     | base work (1) | base velocity (2) | base displacement (2)]
+y = [q (D) | q̇ (D) | base velocity (2) | base displacement (2) | hinge dissipation (N)
+     | coupling dissipation (C) | contact dissipation (1) | base work (1)]
 
 D is the number of degrees of freedom: one angle per planar berry, two per spherical one.
+The rachis motion follows the angles so that the head of y a step's dense output is sampled on
+(events, peaks, the broad phase) places every berry in the world frame too (obstacles are fixed there).
 The energy integrals ride along in y so that the same error control that keeps the angles
 accurate keeps the energy ledger closed. Per-pair impulse and dissipation are *not* in y:
 a cluster has thousands of candidate pairs and almost all of them are idle, so the solver
@@ -16,6 +18,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .compiled import inline
+
 
 class Layout(NamedTuple):
     n: int
@@ -23,19 +27,38 @@ class Layout(NamedTuple):
     c: int
     q: slice
     w: slice
+    base_velocity: slice
+    base: slice
     d_hinge: slice
     d_coupling: slice
     d_contact: int
     work: int
-    base_velocity: slice
-    base: slice
     size: int
 
 
+@inline
+def offsets(n, d, c):
+    """The first index of each block of y for N berries, D angles and C couplings: (base velocity, base
+    displacement, hinge dissipation, coupling dissipation, contact dissipation, base work, size). The head
+    that places the berries is y[:hinge dissipation]. The one definition of the layout (compiled and not)."""
+    o_bv = 2 * d
+    o_b = o_bv + 2
+    o_dh = o_b + 2
+    o_dc = o_dh + n
+    o_contact = o_dc + c
+    return o_bv, o_b, o_dh, o_dc, o_contact, o_contact + 1, o_contact + 2
+
+
 def layout(n: int, d: int, c: int) -> Layout:
-    o = 2 * d + n + c
-    return Layout(n, d, c, slice(0, d), slice(d, 2 * d), slice(2 * d, 2 * d + n), slice(2 * d + n, o),
-                  o, o + 1, slice(o + 2, o + 4), slice(o + 4, o + 6), o + 6)
+    o_bv, o_b, o_dh, o_dc, o_contact, o_w, size = offsets.py_func(n, d, c)
+    return Layout(n, d, c, slice(0, d), slice(d, 2 * d), slice(o_bv, o_b), slice(o_b, o_dh), slice(o_dh, o_dc),
+                  slice(o_dc, o_contact), o_contact, o_w, size)
+
+
+@inline
+def model_offsets(M):
+    """offsets() of a model's arrays (compiled code)."""
+    return offsets(M.berry.shape[0], M.n_dof, M.coupling.shape[0])
 
 
 #: the energy integrals that ride along in y, in the order ledger() returns them

@@ -11,7 +11,7 @@ import numpy as np
 
 from .compiled import jit
 from .forces import active, coupling, elastic_energy, forces, hinge_torque, pedicel_tension, rest_angle
-from .kinematics import kinematics, pair_gap, workspace
+from .kinematics import contact_gap, kinematics, workspace
 
 ENERGY_TERMS = ("kinetic", "gravity", "hinge_elastic", "coupling_elastic", "contact_elastic")
 
@@ -51,7 +51,7 @@ def observe(ys, contacts, accels, M, out):
         ve = 0.0
         for p in range(npair):
             pr = pairs[p]
-            delta, _, nx, ny, nz = pair_gap(berry[pr.i], berry[pr.j], kin[pr.i], kin[pr.j])
+            delta, _, nx, ny, nz = contact_gap(M, pr, kin)
             ve += elastic_energy(pairs[p], delta)
             out.contact_force[s, p] = W.pair[p].force
             out.penetration[s, p] = max(delta, 0.0) if active(C[p]) else 0.0

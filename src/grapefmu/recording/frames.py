@@ -30,7 +30,7 @@ def hinges(model: Model) -> np.ndarray:
     return np.column_stack([b["hinge_x"], b["hinge_y"], b["hinge_z"]])
 
 
-def _quaternion_z_to(v: np.ndarray) -> np.ndarray:
+def quaternion_z_to(v: np.ndarray) -> np.ndarray:
     """(x, y, z, w) of the shortest rotation taking +z onto the unit vectors v (..., 3)."""
     v = v / np.linalg.norm(v, axis=-1, keepdims=True)
     w = 1.0 + v[..., 2]
@@ -51,7 +51,7 @@ def transforms(model: Model, snap: catalogue.Snapshot, k: int, prefix: str = PRE
     d = snap.base_displacement[k]
     out = [(WORLD, rachis(prefix), np.array([d[0], 0.0, d[1]]), np.array([0.0, 0.0, 0.0, 1.0]))]
     p = snap.observation.position[k]
-    q = _quaternion_z_to(hinges(model) - p)
+    q = quaternion_z_to(hinges(model) - p)
     out += [(rachis(prefix), f"{prefix}{name}", p[i], q[i]) for i, name in enumerate(model.names)]
     return out
 

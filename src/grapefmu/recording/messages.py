@@ -144,14 +144,23 @@ def state_messages(model: Model, snap: catalogue.Snapshot, k: int, ns: int, summ
     return out
 
 
+def contact_point(model: Model, obs, k: int, p: int) -> np.ndarray:
+    """Where pair p touches at sample k (rachis frame): midway through the overlap, along the normal from its
+    berry toward the other body (a berry or an obstacle)."""
+    pr = model.pairs[p]
+    return obs.position[k, pr.i] + (model.berries[pr.i].radius - 0.5 * float(obs.penetration[k, p])) * \
+        obs.contact_normal[k, p]
+
+
 def contacts(model: Model, obs, k: int, touching) -> list:
     """grapefmu_msgs/Contact of each pair in `touching` at sample k: the point midway through the overlap."""
     out = []
+    bodies = model.body_names
     for p in touching:
         pr = model.pairs[p]
         n, depth = obs.contact_normal[k, p], float(obs.penetration[k, p])
-        point = obs.position[k, pr.i] + (model.berries[pr.i].radius - 0.5 * depth) * n
-        out.append(msg("grapefmu_msgs/msg/Contact", body_a=model.names[pr.i], body_b=model.names[pr.j],
+        point = contact_point(model, obs, k, p)
+        out.append(msg("grapefmu_msgs/msg/Contact", body_a=bodies[pr.i], body_b=bodies[pr.j],
                        position={"x": point[0], "y": point[1], "z": point[2]},
                        normal={"x": n[0], "y": n[1], "z": n[2]}, depth=depth, force=float(obs.contact_force[k, p])))
     return out
@@ -160,12 +169,13 @@ def contacts(model: Model, obs, k: int, touching) -> list:
 def impact_messages(model: Model, impacts: Impacts, origin: int = 0, prefix: str = frames.PREFIX) -> list:
     """(end stamp in ns, "collision_events", message) of every impact; stamps are `origin` + simulated time."""
     out = []
+    bodies = model.body_names
     for r in impacts.records():
         pr = model.pairs[int(r["pair"])]
         end = origin + to_ns(float(r["end"]))
         out.append((end, "collision_events", msg(
             "grapefmu_msgs/msg/CollisionEvent", header=header(end, frames.rachis(prefix)),
-            body_a=model.names[pr.i], body_b=model.names[pr.j], onset=stamp(origin + to_ns(float(r["onset"]))),
+            body_a=bodies[pr.i], body_b=bodies[pr.j], onset=stamp(origin + to_ns(float(r["onset"]))),
             peak_time=stamp(origin + to_ns(float(r["peak_time"]))), approach_speed=float(r["approach_speed"]),
             separation_speed=float(r["separation_speed"]), peak_force=float(r["peak_force"]),
             impulse=float(r["impulse"]), dissipated_energy=float(r["dissipated"]), bruising=bool(r["bruising"]))))
@@ -191,10 +201,9 @@ def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_
     force = snap.observation.contact_force[k]
     normal = snap.observation.contact_normal[k]
     contact_pts = []
-    for p, pr in enumerate(model.pairs):
-        if force[p] > 0.0:
-            mid = (berries[pr.i] + berries[pr.j]) / 2
-            contact_pts += [mid, mid + normal[p] * force[p] * force_scale]
+    for p in np.flatnonzero(force > 0.0):
+        mid = catalogue.world(frame, contact_point(model, snap.observation, k, p)[None, None])[0, 0]
+        contact_pts += [mid, mid - normal[p] * force[p] * force_scale]  # the force on the pair's first berry
     arr = [marker(0, line, "rachis", {"x": 0.003}, {"r": 0.4, "g": 0.3, "b": 0.2, "a": 1.0},
                   [x for h in hinges for x in (origin, h)]),
            marker(1, line, "twigs", {"x": 0.0015}, {"r": 0.2, "g": 0.6, "b": 0.2, "a": 1.0},
@@ -203,6 +212,11 @@ def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_
     for i, (b, r) in enumerate(zip(berries, M.berry["radius"])):
         arr.append(marker(10 + i, 2, "berries", {"x": 2 * r, "y": 2 * r, "z": 2 * r},
                           {"r": 0.45, "g": 0.1, "b": 0.5, "a": 0.9}, pose={"position": pt(b), "orientation": {"w": 1.0}}))
+    for k_, o in enumerate(model.obstacles):  # a 0.5 m square of each plane, fixed in the world
+        arr.append(marker(100000 + k_, 1, "obstacles", {"x": 0.5, "y": 0.5, "z": 0.001},
+                          {"r": 0.6, "g": 0.6, "b": 0.6, "a": 0.4},
+                          pose={"position": pt(o.point),
+                                "orientation": dict(zip("xyzw", frames.quaternion_z_to(np.array(o.normal)).tolist()))}))
     return msg("visualization_msgs/msg/MarkerArray", markers=arr)
 
 

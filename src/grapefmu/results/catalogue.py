@@ -34,13 +34,14 @@ class Snapshot(NamedTuple):
     ledger: np.ndarray             # (S, 4) J, physics.layout.LEDGER_TERMS: dissipated so far, work done by the base
     totals: np.ndarray             # (S,) records.TOTALS
     observation: Observation
+    obstacle_pairs: np.ndarray     # (P, O) 1.0 where pair p is a berry on obstacle o (Model.obstacle_pairs)
 
 
 @dataclass(frozen=True)
 class Channel:
     name: str
     unit: str          # SI, as FMI writes it ("" for a count or a flag)
-    per: str           # "angle", "berry", "pair" or "cluster"
+    per: str           # "angle", "berry", "pair", "obstacle" or "cluster"
     type: str          # "real", "integer" or "boolean"
     description: str
     value: Callable[[Snapshot], np.ndarray]  # (S, count) per angle, berry or pair; (S,) per cluster
@@ -55,6 +56,8 @@ class Channel:
             return list(model.names)
         if self.per == "pair":
             return [model.pair_name(p) for p in range(len(model.pairs))]
+        if self.per == "obstacle":
+            return [o.name for o in model.obstacles]
         return [""]
 
     def column(self, element: str) -> str:
@@ -142,6 +145,8 @@ CHANNELS: tuple[Channel, ...] = (
     Channel("penetration", "m", "pair", "real", "Penetration of the pair while in contact",
             lambda s: s.observation.penetration, "contacts"),
     Channel("in_contact", "", "pair", "boolean", "True while the pair is in contact", lambda s: s.in_contact, "contacts"),
+    Channel("obstacle_force", "N", "obstacle", "real", "Sum of the contact forces of the berries on the obstacle",
+            lambda s: _force(s) @ s.obstacle_pairs),
     Channel("base_ax", "m/s2", "cluster", "real", "Rachis (gripper) acceleration along x, held over a step",
             lambda s: s.accel[:, 0], "rachis/accel", fmi_causality="input"),
     Channel("base_az", "m/s2", "cluster", "real", "Rachis (gripper) acceleration along z (up), held over a step",

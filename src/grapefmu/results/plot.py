@@ -63,7 +63,8 @@ def _lines_figure(run: Run):
     plt = _pyplot()
     m = run.scene.model
     th = run.scene.thresholds
-    fig, ax = plt.subplots(5, 1, figsize=(9, 11), sharex=True, constrained_layout=True)
+    rows = 6 if m.obstacles else 5
+    fig, ax = plt.subplots(rows, 1, figsize=(9, 11 + 2 * (rows - 5)), sharex=True, constrained_layout=True)
     t = run.t
     for i, name in enumerate(m.names):
         ax[0].plot(t, np.degrees(run.angles[:, i]), label=name)
@@ -93,7 +94,28 @@ def _lines_figure(run: Run):
     ax[4].set_ylabel("rachis accel (m/s²)")
     ax[4].set_xlabel("time (s)")
     _legend(ax[4])
+    if m.obstacles:
+        _impacts_by_surface(run, ax[5])
     return fig
+
+
+def _impacts_by_surface(run: Run, ax) -> None:
+    """Each impact's peak force at its onset, one colour per surface (between berries, each obstacle) with that
+    surface's bruise force; bruising impacts filled."""
+    m = run.scene.model
+    imp = run.impacts
+    surfaces = [("berry–berry", run.scene.thresholds.bruise_force)] + [(o.name, o.bruise_force) for o in m.obstacles]
+    which = np.array([max(m.pairs[int(p)].j - m.n_berries + 1, 0) for p in imp.pair], dtype=int)
+    for k, (name, limit) in enumerate(surfaces):
+        sel = which == k
+        hit, soft = sel & imp.bruising, sel & ~imp.bruising
+        ax.scatter(imp.onset[hit], imp.peak_force[hit], color=f"C{k}", s=18,
+                   label=f"{name}: {int(sel.sum())} impacts, {int(hit.sum())} bruising (filled)")
+        ax.scatter(imp.onset[soft], imp.peak_force[soft], facecolors="none", edgecolors=f"C{k}", s=18)
+        ax.axhline(limit, color=f"C{k}", ls="--", lw=0.8)
+    ax.set_ylabel("impact peak force (N)\n--: its surface's bruise force")
+    ax.set_xlabel("impact onset (s)")
+    _legend(ax)
 
 
 def _cluster_figure(run: Run):
@@ -102,8 +124,9 @@ def _cluster_figure(run: Run):
     plt = _pyplot()
     th = run.scene.thresholds
     t = run.t
-    fig = plt.figure(figsize=(12, 11), constrained_layout=True)
-    grid = fig.add_gridspec(4, 2)
+    obstacles = bool(run.scene.model.obstacles)
+    fig = plt.figure(figsize=(12, 13.5 if obstacles else 11), constrained_layout=True)
+    grid = fig.add_gridspec(5 if obstacles else 4, 2)
     pos = run.positions
     moved = np.linalg.norm(pos - pos[:1] - (pos.mean(axis=1, keepdims=True) - pos[:1].mean(axis=1, keepdims=True)),
                            axis=2).max(axis=1)
@@ -157,4 +180,6 @@ def _cluster_figure(run: Run):
     ax.set_ylabel("rachis accel (m/s²)")
     ax.set_xlabel("time (s)")
     _legend(ax)
+    if obstacles:
+        _impacts_by_surface(run, fig.add_subplot(grid[4, :]))
     return fig

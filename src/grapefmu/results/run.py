@@ -13,7 +13,7 @@ import numpy as np
 
 from ..model.model import Scene
 from ..physics import observe as obs
-from ..physics.damage import detaching, fatigue
+from ..physics.damage import detaching, fatigue, pair_bruise_thresholds
 from ..physics.layout import LEDGER_TERMS, Layout, ledger, layout
 from . import catalogue, trust
 from .impacts import Impacts
@@ -33,6 +33,13 @@ class Run:
     stats: dict[str, Any] = field(default_factory=dict)
 
     # --- state ----------------------------------------------------------------------------------
+    @cached_property
+    def bruise_thresholds(self) -> np.ndarray:
+        """(P, 2): the peak force (N) and dissipated energy (J) at which an impact of each pair bruises (the
+        scene's between berries, an obstacle's own against it)."""
+        th = self.scene.thresholds
+        return pair_bruise_thresholds(self.scene.model.arrays, th.bruise_force, th.bruise_energy)
+
     @property
     def layout(self) -> Layout:
         m = self.scene.model
@@ -76,7 +83,8 @@ class Run:
 
     def snapshot(self) -> catalogue.Snapshot:
         return catalogue.Snapshot(self.t, self.angles, self.angular_velocities, self.mode != 0, self.accel,
-                                  self.base_displacement, self.ledger, self.totals, self.observation)
+                                  self.base_displacement, self.ledger, self.totals, self.observation,
+                                  self.scene.model.obstacle_pairs)
 
     @property
     def contact_force(self) -> np.ndarray:
@@ -140,6 +148,9 @@ class Run:
             out[c.j] += 0.5 * d
         imp = self.impacts
         for p, d in zip(imp.pair, imp.dissipated):
+            if m.touches_obstacle(p):  # an obstacle takes no share
+                out[m.pairs[p].i] += d
+                continue
             out[m.pairs[p].i] += 0.5 * d
             out[m.pairs[p].j] += 0.5 * d
         return out
@@ -165,7 +176,8 @@ class Run:
             unit("dissipated_energy", "J"): float(self.dissipated[-1]),
             "berries_over_detachment_force": int(over.sum()), "detachment_risk": bool(over.any()),
             "detached_berries": [names[i] for i in np.flatnonzero(over)],
-            "fatigue_impacts": int(fatigue(imp.peak_force, th.bruise_force, th.fatigue_fraction).sum()),
+            "fatigue_impacts": int(fatigue(imp.peak_force, self.bruise_thresholds[imp.pair.astype(int), 0],
+                                           th.fatigue_fraction).sum()),
             "damage_risk": bool(imp.bruising.any()),
             unit("max_impact_energy", "J"): float(imp.dissipated.max()) if len(imp) else 0.0,
             unit("max_dissipated_per_berry", "J"): float(per_berry.max()),

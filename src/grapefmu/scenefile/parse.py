@@ -6,6 +6,7 @@ import re
 import tomllib
 from importlib import resources
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -14,7 +15,7 @@ from ..errors import SceneError
 from ..model import excitation as exc
 from . import validate as v
 from ..model.contact import LAWS, ContactLaw, hertz_stiffness, hunt_crossley_chi, kelvin_voigt_damping
-from ..model.model import Berry, ContactPair, Coupling, Model, Scene, SolverSettings, Thresholds
+from ..model.model import Berry, ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings, Thresholds
 from .budget import check_state
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
@@ -24,13 +25,14 @@ MAX_OVERLAP_FRACTION = 0.2
 #: scene and sweep files are a few kB (a 300-berry cluster is about 100 kB); a larger file is a wrong path
 MAX_FILE_BYTES = 64 * 2**20
 
-TOP_KEYS = {"name", "gravity", "berries", "contact", "coupling", "excitation", "solver", "thresholds"}
+TOP_KEYS = {"name", "gravity", "berries", "contact", "coupling", "obstacles", "excitation", "solver", "thresholds"}
 BERRY_KEYS = {"name", "mass", "radius", "twig_length", "hinge_x", "hinge", "hinge_stiffness", "hinge_damping",
               "angle", "angular_velocity", "kind", "azimuth", "rest_angles"}
 #: a spherical twig this close to swinging sideways flat (cos s → 0) is outside the model's chart
 MAX_SWING = math.radians(80.0)
 CONTACT_KEYS = {"law", "stiffness", "effective_modulus", "damping", "restitution", "allow_tension", "pairs"}
 COUPLING_KEYS = {"stiffness", "damping", "pairs"}
+OBSTACLE_KEYS = {"name", "kind", "point", "normal", "bruise_force", "bruise_energy"} | (CONTACT_KEYS - {"pairs"})
 EXCITATION_KEYS = {
     "none": {"kind"},
     "impulse": {"kind", "peak", "start", "duration"},
@@ -94,13 +96,14 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     gravity = v.number("gravity", doc.get("gravity", 9.81), 0.0, 100.0, unit="m/s²")
     berries, angles, rates = _berries(doc.get("berries"))
     names = [b.name for b in berries]
-    pairs, pruned = _contact(doc.get("contact"), berries) if "contact" in doc else ((), 0)
+    pairs, pruned = _contact(doc.get("contact"), berries) if "contact" in doc else ([], 0)
     couplings = _coupling(doc["coupling"], berries) if "coupling" in doc else ()
-    model = Model(tuple(berries), tuple(pairs), tuple(couplings), gravity, pruned)
+    thresholds = _thresholds(doc.get("thresholds", {}))
+    obstacles, touching = _obstacles(doc["obstacles"], berries, thresholds) if "obstacles" in doc else ([], [])
+    model = Model(tuple(berries), tuple(pairs) + tuple(touching), tuple(couplings), gravity, pruned, tuple(obstacles))
     solver = _solver(doc.get("solver", {}))
     check_state(len(model.pairs), solver.zeno_max_events)  # values in range that together would not fit
     excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)
-    thresholds = _thresholds(doc.get("thresholds", {}))
     _check_overlap(model, angles, names)
     if not source:
         from .toml_out import dumps
@@ -121,12 +124,7 @@ def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
                 raise SceneError(f"{key}.{req}", "missing (required)")
         if ("hinge_x" in b) == ("hinge" in b):
             raise SceneError(f"{key}.hinge", "give hinge_x (on the rod) or hinge = [x, y, z], exactly one")
-        nm = b["name"]
-        if not isinstance(nm, str) or not NAME_RE.match(nm):
-            raise SceneError(f"{key}.name", f"expected an identifier of letters, digits and _ (at most 32), got {v.show(nm)}")
-        if nm in seen:
-            raise SceneError(f"{key}.name", f"duplicate berry name {nm!r}")
-        seen.add(nm)
+        nm = _name(key, b["name"], seen)
         mass = v.number(f"{key}.mass", b["mass"], 0.0, 10.0, lo_open=True, unit="kg")
         radius = v.number(f"{key}.radius", b["radius"], 0.0, 0.1, lo_open=True, unit="m")
         length = v.number(f"{key}.twig_length", b["twig_length"], 0.0, 1.0, lo_open=True, unit="m")
@@ -156,6 +154,16 @@ def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
         rates.extend(w)
         berries.append(Berry(nm, mass, radius, length, hinge[0], kh, ch, hinge[1], hinge[2], spherical, azimuth, rest))
     return berries, angles, rates
+
+
+def _name(key: str, raw: Any, seen: set[str]) -> str:
+    """A body's name: an identifier no other berry or obstacle has (it names columns, variables, topics)."""
+    if not isinstance(raw, str) or not NAME_RE.match(raw):
+        raise SceneError(f"{key}.name", f"expected an identifier of letters, digits and _ (at most 32), got {v.show(raw)}")
+    if raw in seen:
+        raise SceneError(f"{key}.name", f"{raw!r} already names a berry or an obstacle")
+    seen.add(raw)
+    return raw
 
 
 def _angles(key: str, raw: Any, nd: int, bound: float, unit: str) -> tuple[float, ...]:
@@ -221,6 +229,20 @@ def _contact(raw: Any, berries: list[Berry]) -> tuple[list[ContactPair], int]:
     key = "contact"
     v.table(key, raw)
     v.no_unknown_keys(key, raw, CONTACT_KEYS)
+    make = _law_of(key, raw)
+    listed = _pair_list(f"{key}.pairs", raw.get("pairs"), berries, _all_pairs(berries))
+    kept = [(i, j) for i, j in listed if _within_reach(berries[i], berries[j])]
+    possible = len(listed) if raw.get("pairs") is not None else len(berries) * (len(berries) - 1) // 2
+    pairs = []
+    for i, j in kept:
+        bi, bj = berries[i], berries[j]
+        pairs.append(ContactPair(i, j, make(bi.mass * bj.mass / (bi.mass + bj.mass), bi.radius, bj.radius)))
+    return pairs, possible - len(kept)
+
+
+def _law_of(key: str, raw: dict) -> Callable[[float, float, float], ContactLaw]:
+    """The contact law a [contact] or [[obstacles]] table asks for, checked once, as a function of what the
+    pair adds (effective mass kg, radii m: a restitution or an effective modulus depends on them)."""
     law = v.choice(f"{key}.law", raw.get("law", "kelvin-voigt"), LAWS)
     clamp = not v.boolean(f"{key}.allow_tension", raw.get("allow_tension", False))
     if not clamp and law != "kelvin-voigt":
@@ -235,31 +257,50 @@ def _contact(raw: Any, berries: list[Berry]) -> tuple[list[ContactPair], int]:
         raise SceneError(f"{key}.{'damping' if 'damping' in raw else 'restitution'}",
                          "the hertz law is elastic; use hunt-crossley for a damped Hertz contact")
     e = v.number(f"{key}.restitution", raw["restitution"], 0.0, 1.0, lo_open=True) if "restitution" in raw else None
-    listed = _pair_list(f"{key}.pairs", raw.get("pairs"), berries, _all_pairs(berries))
-    kept = [(i, j) for i, j in listed if _within_reach(berries[i], berries[j])]
-    possible = len(listed) if raw.get("pairs") is not None else len(berries) * (len(berries) - 1) // 2
-    pairs = []
-    for i, j in kept:
-        bi, bj = berries[i], berries[j]
-        if law == "kelvin-voigt":
-            k = v.number(f"{key}.stiffness", raw.get("stiffness", 2000.0), 0.0, 1e9, lo_open=True, unit="N/m")
-            m_eff = bi.mass * bj.mass / (bi.mass + bj.mass)
-            c = (kelvin_voigt_damping(e, k, m_eff) if e is not None
-                 else v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e6, unit="N·s/m"))
-        else:
-            if "effective_modulus" in raw:
-                emod = v.number(f"{key}.effective_modulus", raw["effective_modulus"], 0.0, 1e12, lo_open=True, unit="Pa")
-                k = hertz_stiffness(emod, bi.radius, bj.radius)
-            else:
-                k = v.number(f"{key}.stiffness", raw.get("stiffness", 1.1e5), 0.0, 1e12, lo_open=True, unit="N/m^1.5")
-            if law == "hertz":
-                c = 0.0
-            elif e is not None:
-                c = hunt_crossley_chi(e)
-            else:
-                c = v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e3, unit="(χ, dimensionless)")
-        pairs.append(ContactPair(i, j, ContactLaw(law, k, c, clamp, e)))
-    return pairs, possible - len(kept)
+    if law == "kelvin-voigt":
+        k = v.number(f"{key}.stiffness", raw.get("stiffness", 2000.0), 0.0, 1e9, lo_open=True, unit="N/m")
+        c = None if e is not None else v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e6, unit="N·s/m")
+        return lambda m_eff, r_i, r_j: ContactLaw(law, k, kelvin_voigt_damping(e, k, m_eff) if c is None else c,
+                                                  clamp, e)
+    emod = (v.number(f"{key}.effective_modulus", raw["effective_modulus"], 0.0, 1e12, lo_open=True, unit="Pa")
+            if "effective_modulus" in raw else None)
+    k = None if emod is not None else v.number(f"{key}.stiffness", raw.get("stiffness", 1.1e5), 0.0, 1e12,
+                                               lo_open=True, unit="N/m^1.5")
+    c = 0.0 if law == "hertz" else hunt_crossley_chi(e) if e is not None else \
+        v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e3, unit="(χ, dimensionless)")
+    return lambda m_eff, r_i, r_j: ContactLaw(law, hertz_stiffness(emod, r_i, r_j) if k is None else k, c, clamp, e)
+
+
+def _obstacles(raw: Any, berries: list[Berry], thresholds: Thresholds) -> tuple[list[Obstacle], list[ContactPair]]:
+    """[[obstacles]]: planes fixed in the world, each with its contact law and bruise thresholds, and a contact
+    pair of every berry with every obstacle (the broad phase watches only the near ones)."""
+    if not isinstance(raw, list):
+        raise SceneError("obstacles", "expected [[obstacles]] tables")
+    out, pairs, seen = [], [], {b.name for b in berries}
+    for n, o in enumerate(raw):
+        key = f"obstacles[{n}]"
+        v.table(key, o)
+        v.no_unknown_keys(key, o, OBSTACLE_KEYS)
+        for req in ("name", "point", "normal"):
+            if req not in o:
+                raise SceneError(f"{key}.{req}", "missing (required)")
+        nm = _name(key, o["name"], seen)
+        v.choice(f"{key}.kind", o.get("kind", "plane"), ("plane",))
+        point = v.vector(f"{key}.point", o["point"], 3, -100.0, 100.0, "m")
+        normal = np.array(v.vector(f"{key}.normal", o["normal"], 3, -1e3, 1e3))
+        length = float(np.linalg.norm(normal))
+        if not length > 1e-9:
+            raise SceneError(f"{key}.normal", "expected a non-zero vector [x, y, z] pointing out of the solid")
+        contact = {k: o[k] for k in CONTACT_KEYS - {"pairs"} if k in o}
+        make = _law_of(key, contact)
+        force = v.number(f"{key}.bruise_force", o.get("bruise_force", thresholds.bruise_force), 0.0, 1e4,
+                         lo_open=True, unit="N")
+        energy = v.number(f"{key}.bruise_energy", o.get("bruise_energy", thresholds.bruise_energy), 0.0, 1e3,
+                          lo_open=True, unit="J")
+        out.append(Obstacle(nm, point, tuple(float(x) for x in normal / length), force, energy))
+        j = len(berries) + n
+        pairs += [ContactPair(i, j, make(b.mass, b.radius, math.inf)) for i, b in enumerate(berries)]
+    return out, pairs
 
 
 def _coupling(raw: Any, berries: list[Berry]) -> list[Coupling]:
@@ -379,6 +420,14 @@ def _check_overlap(model: Model, angles: list[float], names: list[str]) -> None:
         delta = np.zeros(len(model.pairs))
         penetrations(y, M, delta)
         for pr, overlap in zip(model.pairs, delta):
+            if pr.j >= model.n_berries:
+                k = pr.j - model.n_berries
+                bound = MAX_OVERLAP_FRACTION * model.berries[pr.i].radius
+                if overlap > bound:
+                    raise SceneError(f"obstacles[{k}].point", f"berry {names[pr.i]!r} starts {overlap * 1e3:.3g} mm "
+                                     f"inside obstacle {model.obstacles[k].name!r} in the {label} state; at most "
+                                     f"{bound * 1e3:.3g} mm ({MAX_OVERLAP_FRACTION:g} of its radius) is allowed")
+                continue
             bi, bj = model.berries[pr.i], model.berries[pr.j]
             bound = MAX_OVERLAP_FRACTION * min(bi.radius, bj.radius)
             if overlap > bound:

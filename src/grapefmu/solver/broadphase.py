@@ -1,8 +1,9 @@
 """The broad phase: a Verlet list of the pairs that can touch soon (docs/solver.md).
 
 The list keeps every candidate pair whose gap was below the skin when it was built, and every pair in
-contact; it stays valid while no berry moves skin/2 from where it was. Its validity is checked on
-every step's samples (`reach`), which are also what the event search reads.
+contact; it stays valid while no berry moves skin/2 from where it was (in the rachis frame, and in the
+world frame too when the scene has obstacles, which are fixed there). Its validity is checked on every
+step's samples (`reach`), which are also what the event search reads.
 """
 from __future__ import annotations
 
@@ -11,7 +12,8 @@ import math
 import numpy as np
 
 from ..physics.compiled import jit
-from ..physics.kinematics import KINEMATICS, kinematics, pair_gap
+from ..physics.kinematics import KINEMATICS, contact_gap, kinematics
+from ..physics.layout import model_offsets
 from .events import N_SAMPLES
 from .step import dense_head
 
@@ -30,7 +32,7 @@ def rebuild(M, contacts, Bk, B, kin, skin):
     for p in range(contacts.shape[0]):
         c = contacts[p]
         pr = M.pair[p]
-        near = -pair_gap(M.berry[pr.i], M.berry[pr.j], kin[pr.i], kin[pr.j])[0] < skin or c.mode != 0
+        near = -contact_gap(M, pr, kin)[0] < skin or c.mode != 0
         if Bk.pair[p].smooth_until == np.inf:
             c.smooth = near
         if near or c.smooth:
@@ -38,23 +40,25 @@ def rebuild(M, contacts, Bk, B, kin, skin):
             nn += 1
     B.count[0] = nn
     for i in range(kin.shape[0]):
-        B.reference[i, 0], B.reference[i, 1], B.reference[i, 2] = kin[i].px, kin[i].py, kin[i].pz
+        k = kin[i]
+        B.reference[i, 0], B.reference[i, 1], B.reference[i, 2] = k.px, k.py, k.pz
+        B.reference[i, 3], B.reference[i, 4], B.reference[i, 5] = k.wx, k.wy, k.wz
     Bk.counters[0].near_list_rebuilds += 1
 
 
 @jit
 def sample(y0, q, h, M, work, samples):
     """Fill samples from the step's dense output (stage 1 at every sample point)."""
-    m = 2 * M.n_dof
+    m = model_offsets(M)[2]  # the head of y: angles, rates and the rachis motion
     for k in range(N_SAMPLES + 1):
         dense_head(k / N_SAMPLES, y0, q, h, work, m)
         kinematics(work, M, samples[k])
 
 
 @jit
-def reach(samples, reference):
+def reach(samples, reference, world):
     """How far any berry gets from reference over the step: its samples, plus half the largest chord
-    between samples for the stretch in between."""
+    between samples for the stretch in between; in the world frame as well if `world` (obstacles)."""
     worst = 0.0
     for i in range(samples.shape[1]):
         for k in range(N_SAMPLES + 1):
@@ -64,6 +68,12 @@ def reach(samples, reference):
                 o = samples[k - 1, i]
                 d += 0.5 * math.sqrt((p.px - o.px) ** 2 + (p.py - o.py) ** 2 + (p.pz - o.pz) ** 2)
             worst = max(worst, d)
+            if world:
+                d = math.sqrt((p.wx - reference[i, 3]) ** 2 + (p.wy - reference[i, 4]) ** 2
+                              + (p.wz - reference[i, 5]) ** 2)
+                if k > 0:
+                    d += 0.5 * math.sqrt((p.wx - o.wx) ** 2 + (p.wy - o.wy) ** 2 + (p.wz - o.wz) ** 2)
+                worst = max(worst, d)
     return worst
 
 
@@ -79,7 +89,8 @@ def keep_valid(y0, q, h, M, contacts, Bk, B, cfg, work, samples):
     if contacts.shape[0] == 0:
         return 0.0
     sample(y0, q, h, M, work, samples)
-    far = reach(samples, B.reference)
+    world = M.obstacle.shape[0] > 0
+    far = reach(samples, B.reference, world)
     if not math.isfinite(cfg.skin):
         return 0.0
     if far <= 0.5 * cfg.skin:
@@ -87,7 +98,7 @@ def keep_valid(y0, q, h, M, contacts, Bk, B, cfg, work, samples):
     if cfg.step_control:
         return -1.0
     rebuild(M, contacts, Bk, B, samples[0], cfg.skin)
-    far = reach(samples, B.reference)
+    far = reach(samples, B.reference, world)
     if far > 0.5 * cfg.skin:
         rebuild(M, contacts, Bk, B, samples[0], 2.0 * far * 1.001)
     return math.inf  # rebuild again from the committed state

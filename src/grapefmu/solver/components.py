@@ -1,6 +1,7 @@
 """Split a scene into groups of berries that can never interact, and run each group on its own.
 
-Two berries interact only through a candidate contact pair or a coupling. Berries that cannot
+Two berries interact only through a candidate contact pair or a coupling (an obstacle is fixed in the
+world, so touching the same one links no berries: each group keeps every obstacle). Berries that cannot
 reach each other form independent systems, so each group gets its own step sizes: a stiff contact
 in one group never shortens the steps of another, a berry with no possible contact runs the pure
 pendulum model, and each group's results are exactly those of the group simulated alone.
@@ -32,6 +33,8 @@ def groups(model: Model) -> list[list[int]]:
         return i
 
     for link in (*model.pairs, *model.couplings):
+        if link.j >= model.n_berries:
+            continue  # a berry and an obstacle
         a, b = root(link.i), root(link.j)
         if a != b:
             parent[max(a, b)] = min(a, b)
@@ -45,11 +48,12 @@ def sub_scene(scene: Scene, members: list[int]) -> Scene:
     """The scene restricted to some berries (their pairs and couplings, renumbered)."""
     m = scene.model
     new = {old: k for k, old in enumerate(members)}
+    new.update({m.n_berries + k: len(members) + k for k in range(len(m.obstacles))})  # obstacles follow the berries
     pairs = tuple(ContactPair(new[p.i], new[p.j], p.law) for p in m.pairs if p.i in new)
     couplings = tuple(Coupling(new[c.i], new[c.j], c.stiffness, c.damping) for c in m.couplings if c.i in new)
     dof = m.dof
     idx = [k for i in members for k in range(dof[i], dof[i + 1])]
-    model = Model(tuple(m.berries[i] for i in members), pairs, couplings, m.gravity)
+    model = Model(tuple(m.berries[i] for i in members), pairs, couplings, m.gravity, obstacles=m.obstacles)
     return replace(scene, model=model, angles=tuple(scene.angles[k] for k in idx),
                    angular_velocities=tuple(scene.angular_velocities[k] for k in idx))
 
@@ -97,7 +101,8 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
         y[:, lay.work] += run.y[:, sl.work]
         y[:, lay.base_velocity] = run.y[:, sl.base_velocity]
         y[:, lay.base] = run.y[:, sl.base]
-        glob = np.array([pair_index[(members[p.i], members[p.j])] for p in run.scene.model.pairs], dtype=int)
+        body = members + list(range(m.n_berries, m.n_berries + len(m.obstacles)))  # group's body -> scene's
+        glob = np.array([pair_index[(body[p.i], body[p.j])] for p in run.scene.model.pairs], dtype=int)
         if len(glob):
             contacts[:, glob] = run.contacts
             peak_force[glob] = run.peak_force

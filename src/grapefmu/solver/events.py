@@ -13,9 +13,10 @@ import numpy as np
 
 from ..model.contact import HC_MIN_APPROACH_SPEED, Law
 from ..physics.compiled import inline, jit
-from ..physics.damage import bruising
+from ..physics.damage import bruise_thresholds, bruising
 from ..physics.forces import pair_law
-from ..physics.kinematics import pair_gap, pair_state
+from ..physics.kinematics import contact_gap, pair_state
+from ..physics.layout import model_offsets
 from .step import dense_head
 
 EV_DELTA, EV_PHI = 0, 1
@@ -65,7 +66,7 @@ def classify(p, y, M, contacts, kin, old_mode):
 @jit
 def locate_root(fn, sign, p, ta, tb, y0, q, h, M, contacts, kin, work, tol):
     """Illinois iteration on θ ∈ [ta, tb] with v(ta) ≤ 0 < v(tb); returns the right end."""
-    m = 2 * M.n_dof
+    m = model_offsets(M)[2]  # the head of y: angles, rates and the rachis motion
     dense_head(ta, y0, q, h, work, m)
     va = value_at(fn, sign, p, work, M, contacts, kin)
     dense_head(tb, y0, q, h, work, m)
@@ -100,7 +101,7 @@ def locate_root(fn, sign, p, ta, tb, y0, q, h, M, contacts, kin, work, tol):
 @jit
 def largest_on(fn, sign, p, a, b, y0, q, h, M, contacts, kin, work):
     """Golden-section search for the largest sign·fn on [a, b] (θ units); returns (θ, value)."""
-    m = 2 * M.n_dof
+    m = model_offsets(M)[2]  # the head of y: angles, rates and the rachis motion
     gr = 0.6180339887498949
     c1 = b - gr * (b - a)
     c2 = a + gr * (b - a)
@@ -137,7 +138,7 @@ def find_event(y0, q, h, t0, M, contacts, near, n_near, kin, samples, values, wo
         for kk in range(n_near):
             p = near[kk]
             pr, c = M.pair[p], contacts[p]
-            delta, delta_dot, _, _, _ = pair_gap(M.berry[pr.i], M.berry[pr.j], at[pr.i], at[pr.j])
+            delta, delta_dot, _, _, _ = contact_gap(M, pr, at)
             na, f1, s1, f2, s2 = watched(c.mode, pr.law, pr.clamp)
             values[k, 2 * kk] = event_value(f1, s1, pr, c, delta, delta_dot)
             values[k, 2 * kk + 1] = event_value(f2, s2, pr, c, delta, delta_dot) if na == 2 else -1.0
@@ -184,7 +185,7 @@ def find_event(y0, q, h, t0, M, contacts, near, n_near, kin, samples, values, wo
 
 
 @jit
-def switch_pair(p, new_mode, t, delta_dot, contacts, Bk, cfg, impacts, cursor):
+def switch_pair(p, new_mode, t, delta_dot, M, contacts, Bk, cfg, impacts, cursor):
     """Change a pair's mode: open or close its impact (a closed one goes to impacts at the recorder's
     cursor) and keep the Zeno guard."""
     c = contacts[p]
@@ -208,7 +209,7 @@ def switch_pair(p, new_mode, t, delta_dot, contacts, Bk, cfg, impacts, cursor):
         row.impulse = bp.impulse - bp.impulse_at_onset
         row.dissipated = bp.dissipated - bp.dissipated_at_onset
         row.separation_speed = -delta_dot
-        check_bruising(bp, tot, cfg)
+        check_bruising(bp, tot, M, M.pair[p], cfg)
         row.bruising = bp.bruising
         cur.n_impacts += 1
     c.mode = new_mode
@@ -241,10 +242,11 @@ def open_impact(bp, tot, t, approach_speed):
 
 
 @inline
-def check_bruising(bp, tot, cfg):
-    """Count an open impact (bp, its BOOK_PAIR record) as bruising the first time it reaches a threshold."""
-    if not bp.bruising and bruising(bp.impact_peak, bp.dissipated - bp.dissipated_at_onset, cfg.bruise_force,
-                                    cfg.bruise_energy):
+def check_bruising(bp, tot, M, pr, cfg):
+    """Count an open impact (bp, its BOOK_PAIR record; pr its PAIR) as bruising the first time it reaches the
+    thresholds of what it hits."""
+    force, energy = bruise_thresholds(M, pr, cfg.bruise_force, cfg.bruise_energy)
+    if not bp.bruising and bruising(bp.impact_peak, bp.dissipated - bp.dissipated_at_onset, force, energy):
         bp.bruising = True
         tot.bruising_impacts += 1
 

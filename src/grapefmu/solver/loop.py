@@ -178,7 +178,7 @@ def switch_modes(t_commit, event, y, M, contacts, Bk, B, cfg, impacts, cursor, k
         until = Bk.pair[p].smooth_until
         if c.smooth and until == np.inf:
             new, dd = classify(p, y, M, contacts, kin, c.mode)  # impacts booked at step ends
-            switch_pair(p, new, t_commit, dd, contacts, Bk, cfg, impacts, cursor)
+            switch_pair(p, new, t_commit, dd, M, contacts, Bk, cfg, impacts, cursor)
             continue
         if c.smooth:
             if t_commit >= until:
@@ -189,12 +189,12 @@ def switch_modes(t_commit, event, y, M, contacts, Bk, B, cfg, impacts, cursor, k
                 if same:
                     c.smooth = False
                     new, dd = classify(p, y, M, contacts, kin, c.mode)
-                    switch_pair(p, new, t_commit, dd, contacts, Bk, cfg, impacts, cursor)
+                    switch_pair(p, new, t_commit, dd, M, contacts, Bk, cfg, impacts, cursor)
                     changed = True
             continue
         if event or not cfg.locate:
             new, dd = classify(p, y, M, contacts, kin, c.mode)
             if new != c.mode:
-                switch_pair(p, new, t_commit, dd, contacts, Bk, cfg, impacts, cursor)
+                switch_pair(p, new, t_commit, dd, M, contacts, Bk, cfg, impacts, cursor)
                 changed = True
     return changed

@@ -20,7 +20,7 @@ from scipy.optimize import minimize_scalar
 from ..errors import SolverError
 from ..model.contact import HC_MIN_APPROACH_SPEED
 from ..model.model import Scene
-from ..physics.damage import bruising, detaching
+from ..physics.damage import bruising, detaching, pair_bruise_thresholds
 from ..physics.dynamics import rhs
 from ..physics.excitation import base_accel, held
 from ..physics.compiled import jit
@@ -158,9 +158,10 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     for p, o in open_imp.items():
         rows.append([p, o[0], t, o[1], o[2], o[3], y[ny + p] - o[4], y[ny + npair + p] - o[5], math.nan])
     th = scene.thresholds
+    limits = pair_bruise_thresholds(M, th.bruise_force, th.bruise_energy)
     table = np.zeros(len(rows), dtype=IMPACT)
     for k, r in enumerate(rows):
-        table[k] = (*r, bruising(r[4], r[7], th.bruise_force, th.bruise_energy))
+        table[k] = (*r, bruising(r[4], r[7], *limits[int(r[0])]))
     n_open = len(open_imp)
     impacts = Impacts.from_records(table[: len(rows) - n_open], table[len(rows) - n_open:])
     tt = np.concatenate(out_t)

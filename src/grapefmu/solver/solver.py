@@ -107,7 +107,7 @@ class Solver:
         observation, accel, in_contact = now
         self._snapshot = catalogue.Snapshot(self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel,
                                             y[None, lay.base], np.zeros((1, len(LEDGER_TERMS))),
-                                            self.state.book.totals, observation)
+                                            self.state.book.totals, observation, m.obstacle_pairs)
 
     # --- state -----------------------------------------------------------------------------------
     def _fresh_state(self, x0: np.ndarray, zeno_max: int, t_start: float) -> st.SolverState:
@@ -126,7 +126,7 @@ class Solver:
                                      np.zeros((ny, self.tableau.p.shape[1])), np.zeros(1, dtype=st.CLOCK)),
             book=st.Book(np.zeros(1, dtype=st.BOOK_COUNTERS), totals, np.zeros(npair, dtype=st.BOOK_PAIR),
                          np.full(n, -np.inf), np.full((npair, zeno_max), -np.inf)),
-            broad_phase=st.BroadPhase(np.zeros(npair, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros((n, 3))),
+            broad_phase=st.BroadPhase(np.zeros(npair, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros((n, 6))),
             fingerprint=np.array([self._fingerprint()], dtype=np.uint64))
         if self.config["step_control"][0]:
             S.book.pair["smooth_until"][self.M.pair["law"] != Law.KELVIN_VOIGT] = np.inf  # no force jump at onset
@@ -137,7 +137,7 @@ class Solver:
         """The model, method and settings a state belongs to, as one number."""
         M = self.M
         h = hashlib.blake2b(digest_size=8)
-        for part in (M.berry, M.pair, M.coupling, np.array([M.gravity]), self.config, self.excitation.par,
+        for part in (M.berry, M.pair, M.coupling, M.obstacle, np.array([M.gravity]), self.config, self.excitation.par,
                      self.excitation.table, np.frombuffer(self.method.encode(), np.uint8)):
             for field in part.dtype.names or (None,):  # field by field: a record's padding bytes are not data
                 h.update(np.ascontiguousarray(part if field is None else part[field]).tobytes())

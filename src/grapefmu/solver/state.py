@@ -72,7 +72,7 @@ class BroadPhase(NamedTuple):
 
     near: np.ndarray       # (P,) pair indices, the first `count` valid, ascending
     count: np.ndarray      # (1,) int
-    reference: np.ndarray  # (N, 3) berry centres when the list was built
+    reference: np.ndarray  # (N, 6) berry centres when the list was built, rachis frame then world frame
 
 
 class SolverState(NamedTuple):

@@ -1,0 +1,141 @@
+"""Obstacles fixed in the world (docs/model.md §7): berries landing on a crate floor while the rachis moves,
+hitting a wall, against scipy's reference with its own event location; the ledger with a moving base and
+obstacle impacts; per-surface bruise thresholds; the broad phase over a floor; bad obstacle tables."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from grapefmu import GrapefmuError, Solver, simulate
+from grapefmu.cluster import ClusterSpec, cluster_scene
+
+from .conftest import dual, scene
+
+FLOOR = {"name": "floor", "point": [0.0, 0.0, -0.05], "normal": [0.0, 0.0, 1.0], "law": "hunt-crossley",
+         "stiffness": 2e4, "restitution": 0.3, "bruise_force": 0.25}
+WALL = {"name": "wall", "point": [0.04, 0.0, 0.0], "normal": [-1.0, 0.0, 0.0], "law": "kelvin-voigt",
+        "stiffness": 3000.0, "restitution": 0.4}
+CASES = {
+    # carried 5 cm sideways and lowered 12 mm onto a foam floor: both berries land, swing and touch each other
+    "set-down on a floor": dual(angles=(-0.3, 0.3), obstacles=[FLOOR], excitation={"kind": "pick-and-place", "moves": [
+        {"displacement": [0.05, -0.012], "duration": 0.4}]}, solver={"t_end": 1.0}),
+    # shaken sideways next to a hard wall
+    "shaken against a wall": dual(angles=(0.0, 0.2), obstacles=[WALL], excitation={
+        "kind": "sine", "amplitude": [6.0, 0.0], "frequency": 3.0}, solver={"t_end": 1.5}),
+}
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_matches_scipy_reference_with_a_moving_rachis(name):
+    sc = scene(CASES[name])
+    ours = simulate(sc, rtol=1e-12, atol=1e-14)
+    ref = simulate(sc, method="reference", rtol=1e-12, atol=1e-14)
+    hit = {sc.model.pair_name(int(p)) for p in ours.impacts.pair}
+    assert any(sc.model.touches_obstacle(int(p)) for p in ours.impacts.pair), hit
+    assert ours.collision_count == ref.collision_count
+    assert np.abs(ours.angles - ref.angles).max() < 1e-8
+    np.testing.assert_allclose(ours.impacts.onset, ref.impacts.onset, atol=1e-10)
+    np.testing.assert_allclose(ours.impacts.peak_force, ref.impacts.peak_force, rtol=1e-7)
+    np.testing.assert_array_equal(ours.impacts.bruising, ref.impacts.bruising)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_ledger_closes_with_a_moving_base_and_obstacle_impacts(name):
+    run = simulate(scene(CASES[name]), rtol=1e-11, atol=1e-13)
+    assert run.ledger_error() < 1e-8
+    assert abs(run.energy["base_work"][-1]) > 1e-5  # the base did work: the obstacle's share is in the ledger
+
+
+def test_a_wall_returns_the_restitution_it_was_given():
+    """A pendulum swinging into a wall head on: the impact's separation over approach speed is the wall's
+    restitution (Hunt–Crossley's χ is chosen for it, with the berry's mass against a fixed body)."""
+    doc = {"berries": [{"name": "b", "mass": 0.01, "radius": 0.012, "twig_length": 0.05, "hinge_x": 0.0,
+                        "angle": -0.6}],
+           "obstacles": [{"name": "wall", "point": [0.012, 0.0, 0.0], "normal": [-1.0, 0.0, 0.0],
+                          "law": "hunt-crossley", "stiffness": 1e6, "restitution": 0.6}],
+           "solver": {"t_end": 0.4, "rtol": 1e-10, "atol": 1e-13}}
+    run = simulate(scene(doc))
+    first = run.impacts.records()[0]
+    assert first["separation_speed"] / first["approach_speed"] == pytest.approx(0.6, abs=0.01)
+
+
+def test_each_surface_bruises_at_its_own_thresholds():
+    sc = scene(CASES["set-down on a floor"])
+    run = simulate(sc)
+    force, energy = run.bruise_thresholds[run.impacts.pair.astype(int)].T
+    floor = np.array([sc.model.touches_obstacle(int(p)) for p in run.impacts.pair])
+    assert np.all(force[floor] == 0.25) and np.all(force[~floor] == sc.thresholds.bruise_force)
+    expected = (run.impacts.peak_force >= force) | (run.impacts.dissipated >= energy)
+    np.testing.assert_array_equal(run.impacts.bruising, expected)
+    # the floor's low threshold makes its impacts bruise where the scene's would not
+    assert np.any(floor & run.impacts.bruising & (run.impacts.peak_force < sc.thresholds.bruise_force))
+
+
+def test_a_cluster_over_a_floor_watches_only_near_pairs():
+    doc = cluster_scene(ClusterSpec(berries=30, seed=3))
+    start = Solver(scene(doc)).snapshot().observation.position[0, :, 2] - [b["radius"] for b in doc["berries"]]
+    doc["obstacles"] = [{"name": "floor", "point": [0.0, 0.0, float(start.min()) - 0.004], "normal": [0.0, 0.0, 1.0],
+                         "law": "hunt-crossley", "stiffness": 2e4, "restitution": 0.3}]
+    doc["excitation"] = {"kind": "pick-and-place", "moves": [{"displacement": [0.1, -0.01], "duration": 0.5}]}
+    doc["solver"] = {**doc["solver"], "t_end": 0.8, "rtol": 1e-8, "atol": 1e-11}
+    sc = scene(doc)
+    a = Solver(sc).run()
+    b = Solver(sc, skin=math.inf).run()  # the whole candidate list on every step
+    assert sum(sc.model.touches_obstacle(p) for p in range(len(sc.model.pairs))) == 30
+    assert any(sc.model.touches_obstacle(int(p)) for p in a.impacts.pair)
+    assert a.stats["near_pairs_mean"] < 0.3 * a.stats["candidate_pairs"]
+    assert a.collision_count == b.collision_count
+    assert np.abs(a.angles - b.angles).max() < 1e-6
+
+
+@pytest.mark.parametrize("change, key", [
+    ({"normal": [0.0, 0.0, 0.0]}, "obstacles[0].normal"),
+    ({"name": "left"}, "obstacles[0].name"),
+    ({"kind": "box"}, "obstacles[0].kind"),
+    ({"colour": "red"}, "obstacles[0]"),
+    ({"point": [0.0, 0.0, -0.035]}, "obstacles[0].point"),  # the hanging berries would start inside it
+    ({"bruise_force": -1.0}, "obstacles[0].bruise_force"),
+    ({"restitution": 1.5}, "obstacles[0].restitution"),
+])
+def test_bad_obstacles_are_refused_naming_the_key(change, key):
+    with pytest.raises(GrapefmuError) as err:
+        scene(dual(angles=(0.0, 0.0), obstacles=[{**FLOOR, **change}]))
+    assert key in str(err.value)
+
+
+def test_the_fmu_reports_obstacle_totals_that_match_the_core(tmp_path):
+    """The set-down scene as an FMU: per-pair and per-obstacle outputs, driven by a held signal, agree with
+    grapefmu simulate on the same held signal."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from grapefmu.model.excitation import pick_and_place
+    from grapefmu.physics.excitation import accel
+    from grapefmu.scenefile.toml_out import dumps
+
+    root = Path(__file__).resolve().parents[1]
+    doc = CASES["set-down on a floor"]
+    (tmp_path / "setdown.toml").write_text(dumps(doc))
+    t = np.round(np.arange(0, 1.0 + 1e-9, 1e-2), 10)
+    ex = pick_and_place([((0.05, -0.012), 0.4)])
+    np.savetxt(tmp_path / "signal.csv", np.column_stack([t, accel(ex, t)]), delimiter=",", header="time,ax,az",
+               comments="")
+    subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", str(tmp_path / "setdown.toml"), "-o",
+                    str(tmp_path / "setdown.fmu")], check=True, capture_output=True, cwd=root)
+    names = ["angle_left", "angle_right", "contact_force_left_floor", "contact_force_right_floor",
+             "obstacle_force_floor"]
+    out = subprocess.run([sys.executable, "-m", "tests.fmu_driver", "named", str(tmp_path / "setdown.fmu"),
+                          str(tmp_path / "signal.csv"), "1.0", "0.01", ",".join(names)],
+                         check=True, capture_output=True, text=True, cwd=root).stdout
+    rows = np.array(json.loads(out.split("JSON:", 1)[1])["rows"])
+    ref_doc = {**doc, "excitation": {"kind": "csv", "file": str(tmp_path / "signal.csv"), "hold": True}}
+    ref = simulate(scene(ref_doc), 1.0, output_interval=1e-2)
+    floor = [ref.scene.model.pair_name(p) for p in range(len(ref.scene.model.pairs))].index("left_floor")
+    np.testing.assert_allclose(rows[:, 1:3], ref.angles[1:], atol=1e-6)
+    np.testing.assert_allclose(rows[:, 3], ref.contact_force[1:, floor], atol=1e-4)
+    np.testing.assert_allclose(rows[:, 5], rows[:, 3] + rows[:, 4], atol=1e-12)
+    assert rows[:, 5].max() > 0.1  # the berries did land
