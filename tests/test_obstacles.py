@@ -17,6 +17,11 @@ FLOOR = {"name": "floor", "point": [0.0, 0.0, -0.05], "normal": [0.0, 0.0, 1.0],
          "stiffness": 2e4, "restitution": 0.3, "bruise_force": 0.25}
 WALL = {"name": "wall", "point": [0.04, 0.0, 0.0], "normal": [-1.0, 0.0, 0.0], "law": "kelvin-voigt",
         "stiffness": 3000.0, "restitution": 0.4}
+CRATE_WALL = {"name": "crate_wall", "kind": "box", "centre": [0.06, 0.0, -0.06], "size": [0.01, 0.2, 0.04],
+              "yaw": 0.1, "law": "kelvin-voigt", "stiffness": 5000.0, "restitution": 0.5}
+FINGER = {"name": "finger", "kind": "capsule", "attached": "gripper", "ends": [[-0.036, -0.02, -0.02],
+                                                                            [-0.036, 0.02, -0.02]],
+          "radius": 0.005, "law": "hunt-crossley", "stiffness": 5e4, "restitution": 0.4}
 CASES = {
     # carried 5 cm sideways and lowered 12 mm onto a foam floor: both berries land, swing and touch each other
     "set-down on a floor": dual(angles=(-0.3, 0.3), obstacles=[FLOOR], excitation={"kind": "pick-and-place", "moves": [
@@ -24,6 +29,13 @@ CASES = {
     # shaken sideways next to a hard wall
     "shaken against a wall": dual(angles=(0.0, 0.2), obstacles=[WALL], excitation={
         "kind": "sine", "amplitude": [6.0, 0.0], "frequency": 3.0}, solver={"t_end": 1.5}),
+    # lifted 2 mm and carried 10 cm over a crate wall (a box, turned 0.1 rad): the berries clip its edge
+    "carried over a box wall": dual(angles=(0.0, 0.0), obstacles=[CRATE_WALL], excitation={
+        "kind": "pick-and-place", "moves": [{"displacement": [0.0, 0.002], "duration": 0.1},
+                                            {"displacement": [0.1, 0.0], "duration": 0.5}]}, solver={"t_end": 1.0}),
+    # a finger pad on the gripper (a capsule that moves with the rachis) next to the left berry, shaken
+    "finger pad on the gripper": dual(angles=(0.0, 0.0), obstacles=[FINGER], excitation={
+        "kind": "sine", "amplitude": [8.0, 0.0], "frequency": 4.0}, solver={"t_end": 1.0}),
 }
 
 
@@ -93,7 +105,8 @@ def test_a_cluster_over_a_floor_watches_only_near_pairs():
 @pytest.mark.parametrize("change, key", [
     ({"normal": [0.0, 0.0, 0.0]}, "obstacles[0].normal"),
     ({"name": "left"}, "obstacles[0].name"),
-    ({"kind": "box"}, "obstacles[0].kind"),
+    ({"kind": "cone"}, "obstacles[0].kind"),
+    ({"kind": "box"}, "obstacles[0]"),  # a box has a centre and a size, not a point and a normal
     ({"colour": "red"}, "obstacles[0]"),
     ({"point": [0.0, 0.0, -0.035]}, "obstacles[0].point"),  # the hanging berries would start inside it
     ({"bruise_force": -1.0}, "obstacles[0].bruise_force"),
@@ -139,3 +152,30 @@ def test_the_fmu_reports_obstacle_totals_that_match_the_core(tmp_path):
     np.testing.assert_allclose(rows[:, 3], ref.contact_force[1:, floor], atol=1e-4)
     np.testing.assert_allclose(rows[:, 5], rows[:, 3] + rows[:, 4], atol=1e-12)
     assert rows[:, 5].max() > 0.1  # the berries did land
+
+
+def test_recordings_name_and_draw_the_obstacles(tmp_path):
+    """Both independent readers decode every message of a recording with obstacles; contacts and collision
+    events name the obstacle as body_b; the markers carry one shape per obstacle."""
+    from rosbags.highlevel import AnyReader
+
+    from grapefmu.recording.mcap_writer import write_mcap
+    from grapefmu.recording.typestore import TYPESTORE
+
+    from .recordings import decode_everything
+
+    doc = {**CASES["finger pad on the gripper"], "obstacles": [FINGER, CRATE_WALL, FLOOR]}
+    run = simulate(scene(doc), 0.6)
+    write_mcap(run, tmp_path / "r.mcap")
+    counts = decode_everything(tmp_path / "r.mcap")
+    assert counts["contacts"] > 0 and counts["collision_events"] == run.collision_count
+    bodies, shapes = set(), None
+    with AnyReader([tmp_path / "r.mcap"], default_typestore=TYPESTORE) as reader:
+        for conn, _, raw in reader.messages():
+            m = reader.deserialize(raw, conn.msgtype)
+            if conn.topic.endswith("collision_events"):
+                bodies.add(m.body_b)
+            if conn.topic.endswith("markers") and shapes is None:
+                shapes = sorted(x.type for x in m.markers if x.ns == "obstacles")
+    assert "finger" in bodies
+    assert shapes == [1, 1, 3]  # the floor's square, the box, the capsule's cylinder

@@ -43,18 +43,31 @@ class Berry:
         return 2 if self.spherical else 1
 
 
+#: the shapes an obstacle can have (OBSTACLE.kind is the index)
+OBSTACLE_KINDS = ("plane", "box", "capsule")
+PLANE, BOX, CAPSULE = range(3)
+
+
 @dataclass(frozen=True)
 class Obstacle:
-    """A plane fixed in the world (a crate's floor or wall, a conveyor): the side its normal points away
-    from is solid. Berries touching it follow its own contact law and bruise at its own thresholds (padding
-    foam against hard plastic; the laws sit on the berry–obstacle ContactPairs). The world frame is the rachis
-    frame at t = 0 (docs/model.md §7)."""
+    """A body berries hit that is not a berry: a plane (a crate's floor, a conveyor: the side its normal
+    points away from is solid), a box (a crate wall), or a capsule (a finger pad). Fixed in the world, or
+    attached to the gripper (it moves with the rachis; its coordinates are then in the rachis frame). Berries
+    touching it follow its own contact law and bruise at its own thresholds (padding foam against hard
+    plastic; the laws sit on the berry–obstacle ContactPairs). The world frame is the rachis frame at t = 0
+    (docs/model.md §7)."""
 
     name: str
-    point: tuple[float, float, float]   # m, a point of the surface, world frame
-    normal: tuple[float, float, float]  # unit, out of the solid
-    bruise_force: float                 # N, peak force of one impact on this surface that bruises
-    bruise_energy: float                # J, energy dissipated in one impact on this surface that bruises
+    kind: str                                             # OBSTACLE_KINDS
+    point: tuple[float, float, float]                     # m: a plane's point, a box's centre, a capsule's end
+    normal: tuple[float, float, float] = (0.0, 0.0, 1.0)  # plane: unit, out of the solid
+    size: tuple[float, float, float] = (0.0, 0.0, 0.0)    # box: edge lengths along its axes, m
+    yaw: float = 0.0                                      # box: its axes turned about z, rad
+    end: tuple[float, float, float] = (0.0, 0.0, 0.0)     # capsule: the other end of its axis, m
+    radius: float = 0.0                                   # capsule, m
+    attached: bool = False                                # moves with the gripper (rachis-frame coordinates)
+    bruise_force: float = 1.7                             # N, peak force of one impact on it that bruises
+    bruise_energy: float = 1e-3                           # J, energy dissipated in one impact on it that bruises
 
 
 @dataclass(frozen=True)
@@ -84,10 +97,13 @@ BERRY = np.dtype([("mass", "f8"), ("radius", "f8"), ("twig_length", "f8"), ("hin
 #: one candidate contact pair
 PAIR = np.dtype([("i", "i8"), ("j", "i8"), ("law", "i8"), ("stiffness", "f8"), ("damping", "f8"), ("clamp", "?")],
                 align=True)
-#: one obstacle plane n·x = offset (n out of the solid, world frame) with its bruise thresholds; a berry–berry
-#: pair's thresholds are the scene's
-OBSTACLE = np.dtype([("nx", "f8"), ("ny", "f8"), ("nz", "f8"), ("offset", "f8"), ("bruise_force", "f8"),
-                     ("bruise_energy", "f8")], align=True)
+#: one obstacle (Obstacle) as the compiled core reads it, with its bruise thresholds (a berry–berry pair's are
+#: the scene's): point p; a plane's unit normal or a capsule's axis (end − point) in u; a box's half sizes h and
+#: yaw; a capsule's radius
+OBSTACLE = np.dtype([("kind", "i8"), ("attached", "?"), ("px", "f8"), ("py", "f8"), ("pz", "f8"), ("ux", "f8"),
+                     ("uy", "f8"), ("uz", "f8"), ("hx", "f8"), ("hy", "f8"), ("hz", "f8"), ("cos_yaw", "f8"),
+                     ("sin_yaw", "f8"), ("radius", "f8"), ("bruise_force", "f8"), ("bruise_energy", "f8")],
+                    align=True)
 #: one k3/c3 coupling
 COUPLING = np.dtype([("i", "i8"), ("j", "i8"), ("stiffness", "f8"), ("damping", "f8")], align=True)
 
@@ -104,8 +120,8 @@ class ModelArrays(NamedTuple):
     pair (P,) PAIR: berries i < j, law (contact.Law), stiffness k (N/m) or K (N/m^1.5), damping c (N·s/m)
       or χ (hunt-crossley), clamp (the no-tension clamp).
     coupling (C,) COUPLING: berries i, j, stiffness k3 N/m, damping c3 N·s/m.
-    obstacle (O,) OBSTACLE: the plane n·x = offset (nx, ny, nz out of the solid), bruise_force N,
-      bruise_energy J; a pair whose j ≥ N touches obstacle j − N."""
+    obstacle (O,) OBSTACLE: kind (PLANE, BOX, CAPSULE), attached (to the gripper), point, normal or axis u,
+      half sizes h and yaw, radius, bruise_force N, bruise_energy J; a pair whose j ≥ N touches obstacle j − N."""
 
     berry: np.ndarray
     pair: np.ndarray
@@ -178,8 +194,10 @@ class Model:
         pair = np.array([(p.i, p.j, int(p.law.law), p.law.stiffness, p.law.damping, p.law.clamp) for p in self.pairs],
                         dtype=PAIR)
         coupling = np.array([(c.i, c.j, c.stiffness, c.damping) for c in self.couplings], dtype=COUPLING)
-        obstacle = np.array([(*o.normal, float(np.dot(o.normal, o.point)), o.bruise_force, o.bruise_energy)
-                             for o in self.obstacles], dtype=OBSTACLE)
+        obstacle = np.array([(OBSTACLE_KINDS.index(o.kind), o.attached, *o.point,
+                              *(o.normal if o.kind == "plane" else np.subtract(o.end, o.point)),
+                              *(0.5 * np.array(o.size)), np.cos(o.yaw), np.sin(o.yaw), o.radius, o.bruise_force,
+                              o.bruise_energy) for o in self.obstacles], dtype=OBSTACLE)
         return ModelArrays(berry, pair, coupling, obstacle, float(self.gravity), int(dof[-1]))
 
     @cached_property

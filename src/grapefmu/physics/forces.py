@@ -144,7 +144,7 @@ def forces(ax, az, contacts, M, W, pairs, n_pairs):
                 kj.fx += f * nx
                 kj.fy += f * ny
                 kj.fz += f * nz
-            else:
+            elif not M.obstacle[pr.j - nb].attached:  # one fixed in the world moves past the berries
                 work += f * (nx * (ki.wvx - ki.vx) + nz * (ki.wvz - ki.vz))  # F n·ḃ
     return diss, work
 

@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .compiled import inline, jit
+from ..model.model import BOX, PLANE
 from .layout import model_offsets
 
 #: what stage 1 (and stage 2's force) computes per berry, rachis frame
@@ -109,13 +110,54 @@ def pair_gap(bi, bj, ki, kj):
 
 
 @inline
-def plane_gap(b, k, ob):
-    """§7: penetration δ = r − (n·w − d) of berry b (world position w, velocity ẇ in its KINEMATICS k) into
-    the plane n·x = d of obstacle ob (an OBSTACLE record, n out of the solid), its rate δ̇ = −n·ẇ, and the
-    normal from the berry toward the obstacle, −n (so the pair's rule "−F n on its first body" pushes out)."""
-    delta = b.radius - (ob.nx * k.wx + ob.ny * k.wy + ob.nz * k.wz - ob.offset)
-    delta_dot = -(ob.nx * k.wvx + ob.ny * k.wvy + ob.nz * k.wvz)
-    return delta, delta_dot, -ob.nx, -ob.ny, -ob.nz
+def obstacle_gap(b, k, ob):
+    """§7: penetration δ of berry b (its KINEMATICS k) into obstacle ob (an OBSTACLE record), its rate δ̇ and the
+    normal from the berry toward the obstacle, −m (m: the obstacle's outward normal at the nearest point, so
+    the pair's rule "−F n on its first body" pushes the berry out). The berry is taken in the world frame, or
+    in the rachis frame for an obstacle attached to the gripper; the obstacle does not move in its frame, so
+    δ̇ = −m·(the berry's velocity there).
+
+    plane: δ = r − m·(x − p); box: δ = r − |x − nearest point| outside, r + (depth to the nearest face) inside;
+    capsule: δ = r + ρ − |x − nearest point of its axis|."""
+    if ob.attached:
+        x, y, z, vx, vy, vz = k.px, k.py, k.pz, k.vx, k.vy, k.vz
+    else:
+        x, y, z, vx, vy, vz = k.wx, k.wy, k.wz, k.wvx, k.wvy, k.wvz
+    dx, dy, dz = x - ob.px, y - ob.py, z - ob.pz
+    if ob.kind == PLANE:
+        mx, my, mz = ob.ux, ob.uy, ob.uz
+        delta = b.radius - (mx * dx + my * dy + mz * dz)
+    elif ob.kind == BOX:
+        c, s = ob.cos_yaw, ob.sin_yaw
+        lx, ly, lz = c * dx + s * dy, -s * dx + c * dy, dz  # in the box's axes
+        ex = lx - min(max(lx, -ob.hx), ob.hx)
+        ey = ly - min(max(ly, -ob.hy), ob.hy)
+        ez = lz - min(max(lz, -ob.hz), ob.hz)
+        d = math.sqrt(ex * ex + ey * ey + ez * ez)
+        if d > 0.0:
+            ax, ay, az = ex / d, ey / d, ez / d
+            delta = b.radius - d
+        else:  # the centre inside: out through the nearest face
+            fx, fy, fz = ob.hx - abs(lx), ob.hy - abs(ly), ob.hz - abs(lz)
+            if fx <= fy and fx <= fz:
+                ax, ay, az, depth = math.copysign(1.0, lx), 0.0, 0.0, fx
+            elif fy <= fz:
+                ax, ay, az, depth = 0.0, math.copysign(1.0, ly), 0.0, fy
+            else:
+                ax, ay, az, depth = 0.0, 0.0, math.copysign(1.0, lz), fz
+            delta = b.radius + depth
+        mx, my, mz = c * ax - s * ay, s * ax + c * ay, az
+    else:  # CAPSULE
+        uu = ob.ux * ob.ux + ob.uy * ob.uy + ob.uz * ob.uz
+        t = min(max((dx * ob.ux + dy * ob.uy + dz * ob.uz) / uu, 0.0), 1.0)
+        ex, ey, ez = dx - t * ob.ux, dy - t * ob.uy, dz - t * ob.uz
+        d = math.sqrt(ex * ex + ey * ey + ez * ez)
+        if d > 1e-15:
+            mx, my, mz = ex / d, ey / d, ez / d
+        else:
+            mx, my, mz = 0.0, 0.0, 1.0
+        delta = b.radius + ob.radius - d
+    return delta, -(mx * vx + my * vy + mz * vz), -mx, -my, -mz
 
 
 @inline
@@ -125,7 +167,7 @@ def contact_gap(M, pr, kin):
     nb = M.berry.shape[0]
     if pr.j < nb:
         return pair_gap(M.berry[pr.i], M.berry[pr.j], kin[pr.i], kin[pr.j])
-    return plane_gap(M.berry[pr.i], kin[pr.i], M.obstacle[pr.j - nb])
+    return obstacle_gap(M.berry[pr.i], kin[pr.i], M.obstacle[pr.j - nb])
 
 
 @jit

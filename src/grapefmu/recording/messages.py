@@ -212,12 +212,34 @@ def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_
     for i, (b, r) in enumerate(zip(berries, M.berry["radius"])):
         arr.append(marker(10 + i, 2, "berries", {"x": 2 * r, "y": 2 * r, "z": 2 * r},
                           {"r": 0.45, "g": 0.1, "b": 0.5, "a": 0.9}, pose={"position": pt(b), "orientation": {"w": 1.0}}))
-    for k_, o in enumerate(model.obstacles):  # a 0.5 m square of each plane, fixed in the world
-        arr.append(marker(100000 + k_, 1, "obstacles", {"x": 0.5, "y": 0.5, "z": 0.001},
-                          {"r": 0.6, "g": 0.6, "b": 0.6, "a": 0.4},
-                          pose={"position": pt(o.point),
-                                "orientation": dict(zip("xyzw", frames.quaternion_z_to(np.array(o.normal)).tolist()))}))
+    for k_, o in enumerate(model.obstacles):
+        mtype, scale = _obstacle_shape(o)
+        arr.append(marker(100000 + k_, mtype, "obstacles", scale, {"r": 0.6, "g": 0.6, "b": 0.6, "a": 0.4},
+                          pose=_obstacle_pose(o, frame)))
     return msg("visualization_msgs/msg/MarkerArray", markers=arr)
+
+
+def _obstacle_shape(o) -> tuple[int, dict]:
+    """(Marker type, scale) of an obstacle: a 0.5 m square of a plane, the box, a capsule's cylinder."""
+    if o.kind == "plane":
+        return 1, {"x": 0.5, "y": 0.5, "z": 0.001}
+    if o.kind == "box":
+        return 1, dict(zip("xyz", map(float, o.size)))
+    return 3, {"x": 2 * o.radius, "y": 2 * o.radius, "z": float(np.linalg.norm(np.subtract(o.end, o.point)))}
+
+
+def _obstacle_pose(o, frame: catalogue.Snapshot) -> dict:
+    """An obstacle's marker pose in the world frame (one attached to the gripper moves with the rachis)."""
+    centre = np.array(o.point) if o.kind != "capsule" else (np.array(o.point) + np.array(o.end)) / 2
+    if o.kind == "plane":
+        q = frames.quaternion_z_to(np.array(o.normal))
+    elif o.kind == "box":
+        q = np.array([0.0, 0.0, np.sin(o.yaw / 2), np.cos(o.yaw / 2)])
+    else:
+        q = frames.quaternion_z_to(np.subtract(o.end, o.point))
+    if o.attached:
+        centre = catalogue.world(frame, centre[None, None])[0, 0]
+    return {"position": dict(zip("xyz", map(float, centre))), "orientation": dict(zip("xyzw", map(float, q)))}
 
 
 def diagnostics(ns: int, level: int, message: str, values: dict):

@@ -15,7 +15,8 @@ from ..errors import SceneError
 from ..model import excitation as exc
 from . import validate as v
 from ..model.contact import LAWS, ContactLaw, hertz_stiffness, hunt_crossley_chi, kelvin_voigt_damping
-from ..model.model import Berry, ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings, Thresholds
+from ..model.model import (OBSTACLE_KINDS, Berry, ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings,
+                           Thresholds)
 from .budget import check_state
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
@@ -32,7 +33,9 @@ BERRY_KEYS = {"name", "mass", "radius", "twig_length", "hinge_x", "hinge", "hing
 MAX_SWING = math.radians(80.0)
 CONTACT_KEYS = {"law", "stiffness", "effective_modulus", "damping", "restitution", "allow_tension", "pairs"}
 COUPLING_KEYS = {"stiffness", "damping", "pairs"}
-OBSTACLE_KEYS = {"name", "kind", "point", "normal", "bruise_force", "bruise_energy"} | (CONTACT_KEYS - {"pairs"})
+#: each obstacle kind's own keys (required first), besides name, kind, attached, the law's and the thresholds'
+OBSTACLE_SHAPE_KEYS = {"plane": ("point", "normal"), "box": ("centre", "size", "yaw"), "capsule": ("ends", "radius")}
+OBSTACLE_KEYS = {"name", "kind", "attached", "bruise_force", "bruise_energy"} | (CONTACT_KEYS - {"pairs"})
 EXCITATION_KEYS = {
     "none": {"kind"},
     "impulse": {"kind", "peak", "start", "duration"},
@@ -272,34 +275,56 @@ def _law_of(key: str, raw: dict) -> Callable[[float, float, float], ContactLaw]:
 
 
 def _obstacles(raw: Any, berries: list[Berry], thresholds: Thresholds) -> tuple[list[Obstacle], list[ContactPair]]:
-    """[[obstacles]]: planes fixed in the world, each with its contact law and bruise thresholds, and a contact
-    pair of every berry with every obstacle (the broad phase watches only the near ones)."""
+    """[[obstacles]]: planes, boxes and capsules fixed in the world or attached to the gripper, each with its
+    contact law and bruise thresholds, and a contact pair of every berry with every obstacle (the broad phase
+    watches only the near ones)."""
     if not isinstance(raw, list):
         raise SceneError("obstacles", "expected [[obstacles]] tables")
     out, pairs, seen = [], [], {b.name for b in berries}
     for n, o in enumerate(raw):
         key = f"obstacles[{n}]"
         v.table(key, o)
-        v.no_unknown_keys(key, o, OBSTACLE_KEYS)
-        for req in ("name", "point", "normal"):
+        kind = v.choice(f"{key}.kind", o.get("kind", "plane"), OBSTACLE_KINDS)
+        shape = OBSTACLE_SHAPE_KEYS[kind]
+        v.no_unknown_keys(key, o, OBSTACLE_KEYS | set(shape))
+        for req in ("name", *shape[:2]):
             if req not in o:
-                raise SceneError(f"{key}.{req}", "missing (required)")
+                raise SceneError(f"{key}.{req}", f"missing (required for kind = {kind!r})")
         nm = _name(key, o["name"], seen)
-        v.choice(f"{key}.kind", o.get("kind", "plane"), ("plane",))
-        point = v.vector(f"{key}.point", o["point"], 3, -100.0, 100.0, "m")
-        normal = np.array(v.vector(f"{key}.normal", o["normal"], 3, -1e3, 1e3))
-        length = float(np.linalg.norm(normal))
-        if not length > 1e-9:
-            raise SceneError(f"{key}.normal", "expected a non-zero vector [x, y, z] pointing out of the solid")
+        attached = v.choice(f"{key}.attached", o.get("attached", "world"), ("world", "gripper")) == "gripper"
+        if kind == "plane":
+            normal = np.array(v.vector(f"{key}.normal", o["normal"], 3, -1e3, 1e3))
+            length = float(np.linalg.norm(normal))
+            if not length > 1e-9:
+                raise SceneError(f"{key}.normal", "expected a non-zero vector [x, y, z] pointing out of the solid")
+            shape_of = {"point": v.vector(f"{key}.point", o["point"], 3, -100.0, 100.0, "m"),
+                        "normal": tuple(float(x) for x in normal / length)}
+            r_obstacle = math.inf
+        elif kind == "box":
+            shape_of = {"point": v.vector(f"{key}.centre", o["centre"], 3, -100.0, 100.0, "m"),
+                        "size": v.vector(f"{key}.size", o["size"], 3, 0.0, 100.0, "m"),
+                        "yaw": v.number(f"{key}.yaw", o.get("yaw", 0.0), -2 * math.pi, 2 * math.pi, unit="rad")}
+            if min(shape_of["size"]) <= 0.0:
+                raise SceneError(f"{key}.size", f"expected three edge lengths > 0 m, got {v.show(o['size'])}")
+            r_obstacle = math.inf
+        else:
+            ends = o["ends"]
+            if not (isinstance(ends, list) and len(ends) == 2):
+                raise SceneError(f"{key}.ends", f"expected [[x, y, z], [x, y, z]] in m, got {v.show(ends)}")
+            a, b = (v.vector(f"{key}.ends[{e}]", ends[e], 3, -100.0, 100.0, "m") for e in range(2))
+            if math.dist(a, b) < 1e-6:
+                raise SceneError(f"{key}.ends", "the two ends must be at least 1 µm apart (a sphere is a short capsule)")
+            r_obstacle = v.number(f"{key}.radius", o["radius"], 0.0, 10.0, lo_open=True, unit="m")
+            shape_of = {"point": a, "end": b, "radius": r_obstacle}
         contact = {k: o[k] for k in CONTACT_KEYS - {"pairs"} if k in o}
         make = _law_of(key, contact)
         force = v.number(f"{key}.bruise_force", o.get("bruise_force", thresholds.bruise_force), 0.0, 1e4,
                          lo_open=True, unit="N")
         energy = v.number(f"{key}.bruise_energy", o.get("bruise_energy", thresholds.bruise_energy), 0.0, 1e3,
                           lo_open=True, unit="J")
-        out.append(Obstacle(nm, point, tuple(float(x) for x in normal / length), force, energy))
+        out.append(Obstacle(nm, kind, attached=attached, bruise_force=force, bruise_energy=energy, **shape_of))
         j = len(berries) + n
-        pairs += [ContactPair(i, j, make(b.mass, b.radius, math.inf)) for i, b in enumerate(berries)]
+        pairs += [ContactPair(i, j, make(b.mass, b.radius, r_obstacle)) for i, b in enumerate(berries)]
     return out, pairs
 
 
@@ -424,7 +449,8 @@ def _check_overlap(model: Model, angles: list[float], names: list[str]) -> None:
                 k = pr.j - model.n_berries
                 bound = MAX_OVERLAP_FRACTION * model.berries[pr.i].radius
                 if overlap > bound:
-                    raise SceneError(f"obstacles[{k}].point", f"berry {names[pr.i]!r} starts {overlap * 1e3:.3g} mm "
+                    where = OBSTACLE_SHAPE_KEYS[model.obstacles[k].kind][0]
+                    raise SceneError(f"obstacles[{k}].{where}", f"berry {names[pr.i]!r} starts {overlap * 1e3:.3g} mm "
                                      f"inside obstacle {model.obstacles[k].name!r} in the {label} state; at most "
                                      f"{bound * 1e3:.3g} mm ({MAX_OVERLAP_FRACTION:g} of its radius) is allowed")
                 continue
