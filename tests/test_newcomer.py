@@ -448,8 +448,8 @@ def _run_for_plot(berries: int):
 
 @pytest.mark.parametrize("berries", [2, 12])
 def test_plot_legends_sit_beside_their_panels_and_clusters_have_a_colour_bar(berries):
-    from grapefmu.results.plot import _pyplot, figure
-    plt = _pyplot()
+    from grapefmu.results.plot import pyplot, figure
+    plt = pyplot()
     fig = figure(_run_for_plot(berries))
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()

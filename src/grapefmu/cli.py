@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shlex
 import signal
 import sys
 import threading
@@ -236,7 +237,7 @@ def cmd_risk(a: argparse.Namespace) -> int:
     say = lambda line: print(f"{_newline()}{line}", file=sys.stderr, flush=True)  # noqa: E731
     try:
         r = assess(a.plans, dist, a.samples, a.seed, out, max_bruise=a.max_bruise, scales=scales, workers=a.workers,
-                   scheduler=a.scheduler, say=say, command="grapefmu risk " + " ".join(sys.argv[2:]))
+                   scheduler=a.scheduler, say=say, command="grapefmu " + shlex.join(a.argv))
     except KeyboardInterrupt as e:
         e.note = (f"the finished runs are kept in {out} (a journal per interrupted sweep, a table per finished "
                   "one); run the same command again to resume")
@@ -592,6 +593,7 @@ def _interrupted(a: argparse.Namespace, before: dict[str, tuple | None]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
+    a.argv = list(sys.argv[1:] if argv is None else argv)  # as typed: a report names the command that made it
     cmd = f"grapefmu {a.command}"
     before = {p: _stamp(p) for p in _targets(a)}
     handlers = {}

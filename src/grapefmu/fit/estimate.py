@@ -137,12 +137,14 @@ def fit(doc: dict[str, Any], base_dir: Path, params: list[Parameter], series: li
         warnings.append(f"least squares stopped after {sol.nfev} evaluations without converging; the estimates "
                         "are where it stopped")
     stats = _statistics(J, r, P)
+    theta = theta.copy()
+    theta[:P][stats["zero"]] = problem.u0[stats["zero"]]  # the data say nothing: keep the scene's value
     estimates = []
     for j, p in enumerate(params):
         u, se_u = float(theta[j]), float(stats["se"][j])
         note = ""
         if stats["zero"][j]:
-            note = "no sensitivity: the data do not depend on it" + _hint(p)
+            note = "no sensitivity: the data do not depend on it" + _hint(p) + "; the scene's value kept"
         elif not se_u <= MAX_SE_U:
             note = (f"standard error of {p.transform} {p.key} is {se_u:.3g}" + (
                 f" (a factor {np.exp(min(se_u, 700)):.3g})" if p.transform == "log" else "")

@@ -103,6 +103,8 @@ def parameter(key: str, doc: dict[str, Any], where: str = "--param", drawn: bool
 
 def parameters(keys: list[str], doc: dict[str, Any], where: str = "--param") -> list[Parameter]:
     """Keys as Parameters, none of them reaching a value another one reaches (a twig fitted twice)."""
+    if not keys:
+        raise SceneError(where, f"name at least one parameter to estimate; allowed: {allowed()}")
     out = [parameter(k, doc, where) for k in keys]
     marked = copy.deepcopy(doc)
     for n, p in enumerate(out):

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..results.plot import PLOT_TYPES, _pyplot
+from ..results.plot import PLOT_TYPES, pyplot, save
 from ..results.writers import atomic_path, check_target
 from ..scenefile import dumps
 from .estimate import FitResult
@@ -64,7 +64,7 @@ def check_outputs(scene: str | Path, report: str | Path | None, plot: str | Path
 def plot_residuals(res: FitResult, path: str | Path) -> None:
     """Per tracked angle: measured and fitted angle over time, and below it the residual in mrad with ±2σ̂;
     beside them the residuals' histogram against the normal density of σ̂ (white noise looks like it)."""
-    plt = _pyplot()
+    plt = pyplot()
     keys = list(dict.fromkeys((tr.series, tr.dof) for tr in res.traces))
     fig, axes = plt.subplots(2 * len(keys), 2, figsize=(11, 2.6 * 2 * len(keys)), squeeze=False,
                              gridspec_kw={"width_ratios": [4, 1]})
@@ -100,6 +100,4 @@ def plot_residuals(res: FitResult, path: str | Path) -> None:
     fig.suptitle(f"fit: {res.residuals} angles, residual σ̂ = {sig:.3g} mrad"
                  + (f"; not identifiable: {', '.join(flagged)}" if flagged else ""), fontsize=10)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format=Path(path).suffix.lstrip(".").lower())
-    plt.close(fig)
+    save(fig, path)

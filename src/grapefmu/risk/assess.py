@@ -29,11 +29,11 @@ def check_plans(plans: list[str | Path], dist: Distribution) -> None:
     """Every plan is a scene holding every key the distribution sets; no two plans share a file name (their
     tables are named after them)."""
     if not plans:
-        raise GrapefmuError("risk: name at least one plan (a scene TOML)")
+        raise GrapefmuError("plans: none given; name at least one plan (a scene TOML)")
     stems = [Path(p).stem for p in plans]
     if len(set(stems)) != len(stems):
-        raise GrapefmuError(f"risk: plans {', '.join(map(str, plans))}: two have the same file name; their tables "
-                            "are named after them")
+        raise GrapefmuError(f"{', '.join(map(str, plans))}: two plans have the same file name; their tables are "
+                            "named after them")
     for p in plans:
         doc, _ = plan_doc(p)
         for key in dist.keys:

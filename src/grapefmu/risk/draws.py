@@ -102,8 +102,8 @@ def distribution(doc: dict[str, Any], fit: str | Path | None = None, ranges: lis
         raise GrapefmuError("--range: a key is given twice")
     if fit is None:
         if not rs:
-            raise GrapefmuError("risk: give the parameters' distribution: --fit FIT.json (grapefmu fit --report) "
-                                "and/or --range KEY=LOW:HIGH")
+            raise GrapefmuError("--fit, --range: neither given; the parameters' distribution comes from --fit "
+                                "FIT.json (grapefmu fit --report) and/or --range KEY=LOW:HIGH")
         return Distribution(ranges=tuple(rs), source="ranges")
     report = _read_fit(Path(fit))
     overridden = {r.parameter.key for r in rs}

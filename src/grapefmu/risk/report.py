@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..results.plot import _pyplot
+from ..results.plot import pyplot, save
 from ..results.writers import atomic_path
 from .draws import Distribution
 from .montecarlo import LEVEL, Outcome
@@ -62,7 +62,7 @@ def write_json(path: str | Path, outcomes: list[Outcome], dist: Distribution, sa
 def plot(path: str | Path, outcomes: list[Outcome], search: Search | None) -> None:
     """Bars with their intervals: the cluster and each berry, one colour per plan; bruise and detachment; and
     the search's probability against the moves' duration."""
-    plt = _pyplot()
+    plt = pyplot()
     panels = 3 if search is not None else 2
     fig, axes = plt.subplots(1, panels, figsize=(5.2 * panels, 4.2), squeeze=False)
     names = ["cluster", *[b for b in outcomes[0].berry_bruise if all(b in o.berry_bruise for o in outcomes)]]
@@ -92,12 +92,15 @@ def plot(path: str | Path, outcomes: list[Outcome], search: Search | None) -> No
         if search.fastest is not None:
             ax.axvline(search.fastest.duration, color="C2", lw=1,
                        label=f"fastest shown under: {search.fastest.duration:.3g} s")
-        ax.set_xlabel("duration of the moves (s)")
+        from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
+        ax.set_xscale("log")  # the bisection is geometric
+        ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xlabel("duration of the moves (s), log scale")
         ax.set_ylabel("P(bruise)")
-        ax.set_ylim(0, 1)
+        ax.set_ylim(-0.02, 1.02)
         ax.set_title(f"{steps[0].plan}: time-scale search", fontsize=10)
         ax.legend(fontsize=8)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format=Path(path).suffix.lstrip(".").lower())
-    plt.close(fig)
+    save(fig, path)
