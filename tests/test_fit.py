@@ -59,6 +59,7 @@ def test_known_parameters_are_recovered_within_two_standard_errors_in_20_seeded_
     for seed in range(20):
         res = fit(start, Path.cwd(), params, [measured(TRUTH, seed)])
         assert 0.8e-3 < res.sigma < 1.2e-3, res.sigma  # the residuals are the 1 mrad noise
+        assert not res.warnings, res.warnings          # no false alarm: nothing flagged, residuals white
         for e in res.estimates:
             assert e.identifiable, (seed, e)
             z[e.key].append((e.value - TRUE[e.key]) / e.se)
@@ -96,6 +97,17 @@ def test_a_grazing_impact_leaves_the_contact_law_flagged_by_its_standard_errors(
         assert not by[key].identifiable and "standard error" in by[key].note and np.isfinite(by[key].se), by[key]
         assert by[key].se_u > 0.5
     assert by["berries[0].hinge_stiffness"].identifiable and by["berries[0].hinge_stiffness"].se_u < 0.01
+
+
+def test_a_model_that_cannot_fit_the_data_is_flagged_by_its_structured_residuals():
+    """Only the damping fitted while the hinge stiffness is 30 % off: the residuals follow the swing, not the noise."""
+    wrong = copy.deepcopy(TRUTH)
+    for b in wrong["berries"]:
+        b["hinge_stiffness"] *= 1.3
+    res = fit(wrong, Path.cwd(), parameters(["berries[*].hinge_damping"], wrong), [measured(TRUTH, 5)])
+    structured = [w for w in res.warnings if "structured" in w]
+    assert {w.split("angle ")[1].split(" ")[0] for w in structured} == {"left", "right"}, res.warnings
+    assert res.sigma > 5e-3
 
 
 def test_segments_and_untracked_berries_recover_the_same_parameters():

@@ -203,8 +203,19 @@ def cmd_fit(a: argparse.Namespace) -> int:
     params = parameters(a.param or [], doc)
     series = [read_measured(d, scene.model) for d in a.data]
     _compiling()
-    res = fit(doc, Path(a.scene).parent, params, series, segments=a.segments,
+    start = time.perf_counter()
+
+    def progress(n: int, rms: float) -> None:  # after a second, one line on stderr updated per evaluation
+        wall = time.perf_counter() - start
+        if wall >= 1.0:
+            sys.stderr.write(f"\rfit: {n} evaluations, residual rms {rms:.3g} rad, wall {wall:.1f} s ")
+            sys.stderr.flush()
+            Progress.open_line = True
+
+    res = fit(doc, Path(a.scene).parent, params, series, segments=a.segments, progress=progress,
               **({"rtol": a.rtol} if a.rtol is not None else {}), **({"atol": a.atol} if a.atol is not None else {}))
+    if Progress.open_line:
+        print(_newline(), end="", file=sys.stderr)
     tracked = sorted({d for m in series for d in m.dofs})
     print(f"fit: {len(series)} series, {res.residuals} measured angles ({', '.join(tracked)}), {len(params)} "
           f"parameter(s) and the start states ({res.unknowns} unknowns informed by the data); {res.iterations} "
@@ -424,7 +435,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "optionally base_ax_m_s2 and base_az_m_s2 (the gripper). docs/fit_and_risk.md")
     f.add_argument("scene", help="scene TOML: the rig, its initial state (a starting guess) and starting values")
     f.add_argument("data", nargs="+", help="measured CSV, one per recorded series")
-    f.add_argument("--param", action="append", metavar="KEY",
+    f.add_argument("--param", action="append", metavar="KEY", required=True,
                    help="a parameter to estimate, given again for more: berries[*].hinge_stiffness (shared), "
                         "berries[0].hinge_damping (one twig), contact.stiffness, contact.restitution, "
                         "contact.damping, coupling.stiffness, ... (required)")

@@ -21,6 +21,7 @@ The condition number of JᵀJ (columns scaled to unit length) is reported beside
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,6 +39,8 @@ MAX_SE_U = 0.5
 ZERO_COLUMN = 1e-9
 #: correlations of estimated parameters beyond this are named in a warning
 HIGH_CORRELATION = 0.95
+#: a lag-1 autocorrelation of a trace's residuals above this is reported as structure (white noise: ±1/√n)
+MAX_AUTOCORRELATION = 0.5
 #: how far from its start a parameter may go, in u (a factor e^BOUND_U ≈ 1000 either way for log p)
 BOUND_U = 7.0
 
@@ -108,14 +111,17 @@ def _finite(x: float) -> float | None:
 
 
 def fit(doc: dict[str, Any], base_dir: Path, params: list[Parameter], series: list[Measured], *, segments: int = 1,
-        rtol: float = FIT_RTOL, atol: float = FIT_ATOL, max_evaluations: int = 200) -> FitResult:
-    """Estimate `params` of the scene document from the measured series (module docstring)."""
+        rtol: float = FIT_RTOL, atol: float = FIT_ATOL, max_evaluations: int = 200,
+        progress: Callable[[int, float], None] | None = None) -> FitResult:
+    """Estimate `params` of the scene document from the measured series (module docstring); `progress` is told
+    after every evaluation of the misfit how many there were and the residuals' rms (rad)."""
     from scipy.optimize import least_squares
 
     start = time.perf_counter()
     if not params:
         raise GrapefmuError("--param: name at least one parameter to fit")
     problem = Shooting(doc, base_dir, params, series, segments, rtol, atol)
+    problem.progress = progress
     P = len(params)
     n = sum(m.samples for m in series)
     if n <= problem.size:
@@ -165,6 +171,7 @@ def fit(doc: dict[str, Any], base_dir: Path, params: list[Parameter], series: li
                 warnings.append(f"{params[a].key} and {params[b].key} are correlated {corr[a, b]:+.3f}: the data "
                                 "tell their effects apart only weakly")
     traces = _traces(problem, theta)
+    warnings += _structured(traces, stats["sigma"])
     return FitResult(estimates, corr, stats["cov"], stats["sigma"], len(r), stats["rank"], stats["condition"],
                      sol.nfev, time.perf_counter() - start, warnings,
                      scene_with(doc, params, theta[:P]), traces)
@@ -204,6 +211,25 @@ def _statistics(J: np.ndarray, r: np.ndarray, P: int) -> dict[str, Any]:
     condition = float((S[0] / S[-1]) ** 2) if len(S) and S[-1] > 0 else float("inf")
     return {"se": se, "cov": covp, "corr": corr, "zero": zero[:P], "sigma": sigma, "rank": rank,
             "condition": condition}
+
+
+def _structured(traces: list[Trace], sigma: float) -> list[str]:
+    """A warning per trace whose residuals are not white: measurement noise is independent from frame to frame,
+    so a lag-1 autocorrelation beyond MAX_AUTOCORRELATION (5 standard deviations of white noise's at 100 frames)
+    means the model misses the data there: a local minimum (another start, other --segments) or model error."""
+    out = []
+    for tr in traces:
+        r = tr.measured - tr.fitted
+        r = r[np.isfinite(r)]
+        if len(r) < 20 or not np.any(r):
+            continue
+        rho = float(np.sum(r[1:] * r[:-1]) / np.sum(r * r))
+        if rho > MAX_AUTOCORRELATION:
+            out.append(f"the residuals of angle {tr.dof} in {tr.series} from {tr.t[0]:.3g} s to {tr.t[-1]:.3g} s are "
+                       f"structured (lag-1 autocorrelation {rho:.2f}, rms {np.sqrt(np.mean(r * r)):.3g} rad against "
+                       f"σ̂ {sigma:.3g} rad): the fit may sit in a local minimum (start elsewhere, change --segments) "
+                       "or the model misses something there")
+    return out
 
 
 def _traces(problem: Shooting, theta: np.ndarray) -> list[Trace]:

@@ -16,7 +16,9 @@ which gives up a little information at each boundary (the measured frames pin th
 keeps every residual a measured angle minus the model's and the statistics of the fit plain; the true
 parameters and states reproduce the data exactly, so the estimator stays consistent. An untracked berry is
 integrated across the whole record, so the segments do not shorten its shot: track every berry that
-collides for a long record with many collisions.
+collides for a long record with many collisions. Measured (benchmarks/fit_segments.py, docs/fit_and_risk.md):
+segments do not always widen the basin of convergence; a fit stuck in a local minimum is flagged by its
+structured residuals (estimate.py).
 
 Sensitivities: central finite differences. Adjoint or forward sensitivities of an event-driven solver need
 the jump of the sensitivity at every contact onset and release, a second solver beside the first; the
@@ -29,6 +31,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -97,6 +100,8 @@ class Shooting:
         self.theta0 = self._start()
         self._cache: tuple[bytes, Shots] | None = None
         self.failures = 0  # trial points where the solver failed
+        self.evaluations = 0
+        self.progress: Callable[[int, float], None] | None = None  # (evaluations, residual rms in rad)
 
     # --- the model at θ ----------------------------------------------------------------------------------
     def scene(self, u: np.ndarray, series: int | None = None) -> Scene:
@@ -162,6 +167,10 @@ class Shooting:
         if self._cache is None or self._cache[0] != key:
             try:
                 self._cache = (key, self.shots(np.asarray(theta, float)))
+                self.evaluations += 1
+                if self.progress is not None:
+                    r = np.concatenate(self._cache[1].residuals)
+                    self.progress(self.evaluations, float(np.sqrt(np.mean(r * r))) if len(r) else 0.0)
             except SolverError:
                 if self._cache is None:
                     raise
@@ -205,15 +214,15 @@ class Shooting:
 
     # --- starting point ------------------------------------------------------------------------------------
     def _start(self) -> np.ndarray:
-        """θ to start from: the parameters from the scene; a tracked angle and its rate from the first frames of
-        its segment (a quadratic through them)."""
+        """θ to start from: the parameters from the scene; a tracked angle and its rate from the frames around its
+        segment's start (_angle_and_rate)."""
         theta = np.zeros(self.size)
         theta[:len(self.params)] = self.u0
         for seg in self.segments:
             m = self.series[seg.series]
             for n in range(len(m.dofs)):
                 theta[seg.offset + n], theta[seg.offset + len(m.dofs) + n] = _angle_and_rate(
-                    m.t[seg.rows], m.angles[seg.rows, n])
+                    m.t, m.angles[:, n], int(seg.rows[0]))
         return theta
 
 
@@ -227,12 +236,18 @@ def _split(m: Measured, segments: int) -> list[np.ndarray]:
     return [np.arange(a, b) for a, b in zip(np.r_[0, edges], np.r_[edges, n])]
 
 
-def _angle_and_rate(t: np.ndarray, q: np.ndarray, frames: int = 7) -> tuple[float, float]:
-    """A start for an angle and its rate: a quadratic through the first few tracked frames, at the first time."""
-    ok = np.flatnonzero(np.isfinite(q))[:frames]
+def _angle_and_rate(t: np.ndarray, q: np.ndarray, k: int, half: int = 2) -> tuple[float, float]:
+    """A start for an angle and its rate at frame k: a quadratic through the tracked frames within `half` frames
+    of it (centred where the series allows: a swing turns by a radian in a few frames, so a longer or one-sided
+    window biases the rate), taken at t[k]."""
+    lo, hi = max(k - half, 0), min(k + half + 1, len(t))
+    if hi - lo < 2 * half + 1:  # at an end of the series: as many frames on the one side there is
+        lo, hi = (0, min(2 * half + 1, len(t))) if lo == 0 else (max(len(t) - 2 * half - 1, 0), len(t))
+    ok = np.arange(lo, hi)[np.isfinite(q[lo:hi])]
     if len(ok) < 3:
-        return float(q[ok[0]]) if len(ok) else 0.0, 0.0
-    c = np.polyfit(t[ok] - t[0], q[ok], 2)
+        near = np.flatnonzero(np.isfinite(q))
+        return float(q[near[np.argmin(np.abs(near - k))]]), 0.0
+    c = np.polyfit(t[ok] - t[k], q[ok], 2)
     return float(c[2]), float(c[1])
 
 
