@@ -35,7 +35,8 @@ def main() -> None:
         b["hinge_stiffness"], b["hinge_damping"] = 2.0e-3, 1.2e-5
     start["contact"].update(stiffness=800.0, restitution=0.7)
     params = parameters(list(TRUE), start)
-    print("| segments | σ̂ (mrad) | evaluations | wall (s) | (estimate − truth) / standard error | structured residuals |")
+    print("| segments | σ̂ (mrad) | evaluations | wall (s) | (estimate − truth) / standard error "
+          "| structured residuals |")
     print("|---|---|---|---|---|---|")
     for segments in (1, 2, 3, 6):
         t = time.perf_counter()

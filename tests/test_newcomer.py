@@ -290,8 +290,8 @@ def test_every_command_has_a_description_and_the_default_of_every_option():
     import argparse
     ap = build_parser()
     sub = next(a for a in ap._actions if isinstance(a, argparse._SubParsersAction))
-    assert set(sub.choices) == {"simulate", "paper", "cluster", "sweep", "fit", "risk", "build-fmu", "replay", "outputs",
-                                "bench"}
+    assert set(sub.choices) == {"simulate", "paper", "cluster", "sweep", "fit", "risk", "build-fmu", "replay",
+                                "outputs", "bench"}
     for name, p in sub.choices.items():
         page = p.format_help()
         assert p.description and p.description.endswith("."), name

@@ -91,7 +91,8 @@ def parse_range(text: str, doc: dict[str, Any]) -> Range:
                             "e.g. berries[*].hinge_stiffness=3e-4:3e-3")
     p = parameter(key.strip(), doc, "--range", drawn=True)
     if lo <= 0 or (p.transform == "logit" and hi >= 1):
-        raise GrapefmuError(f"--range {text}: {p.key} needs {'0 < LOW < HIGH < 1' if p.transform == 'logit' else '0 < LOW < HIGH'}")
+        need = "0 < LOW < HIGH < 1" if p.transform == "logit" else "0 < LOW < HIGH"
+        raise GrapefmuError(f"--range {text}: {p.key} needs {need}")
     return Range(p, lo, hi)
 
 
@@ -113,6 +114,10 @@ def distribution(doc: dict[str, Any], fit: str | Path | None = None, ranges: lis
             raise GrapefmuError(f"--fit {fit}: {p['key']} was not identifiable in that fit ({p.get('note', '')}); "
                                 f"give its range instead: --range {p['key']}=LOW:HIGH")
     params = tuple(parameter(p["key"], doc, f"--fit {fit}", drawn=True) for _, p in rows)
+    for par, (_, row) in zip(params, rows):
+        if "unit" in row and row["unit"] != par.unit:  # a stiffness fitted for one contact law, drawn for another
+            raise GrapefmuError(f"--fit {fit}: {par.key} was fitted in {row['unit']}; this plan's contact law takes "
+                                f"{par.unit}")
     idx = [k for k, _ in rows]
     cov = np.array(report["covariance_u"], dtype=float)[np.ix_(idx, idx)]
     if not np.all(np.isfinite(cov)) or np.any(np.linalg.eigvalsh(cov) < -1e-12 * max(np.abs(cov).max(), 1e-300)):
