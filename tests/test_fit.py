@@ -121,6 +121,26 @@ def test_segments_and_untracked_berries_recover_the_same_parameters():
         assert e.identifiable and abs(e.value - TRUE[e.key]) <= 2.5 * e.se, e
 
 
+def test_a_measured_gripper_motion_drives_the_rig():
+    """Berries at rest carried 0.2 m by a gripper whose acceleration is logged per frame (the camera's columns
+    base_ax_m_s2, base_az_m_s2): the rig scene has no excitation of its own, the measured motion drives it, and
+    the parameters come back within 2 standard errors."""
+    carried = copy.deepcopy(TRUTH)
+    carried["berries"][0]["angle"] = 0.0
+    carried["excitation"] = {"kind": "pick-and-place", "start": 0.1,
+                             "moves": [{"displacement": [0.2, 0.0], "duration": 0.4}]}
+    carried["solver"]["t_end"] = 1.5
+    cols = camera_data(scene_from_dict(copy.deepcopy(carried), Path.cwd()), seed=3, gripper=True)
+    data = Measured(Path("g.csv"), cols["time_s"], ("left", "right"),
+                    np.column_stack([cols["angle_left_rad"], cols["angle_right_rad"]]),
+                    np.column_stack([cols["base_ax_m_s2"], cols["base_az_m_s2"]]))
+    rig = guess({**carried, "excitation": {"kind": "none"}})
+    res = fit(rig, Path.cwd(), parameters(list(TRUE), rig), [data])
+    assert 0.8e-3 < res.sigma < 1.2e-3 and not res.warnings, res.warnings
+    for e in res.estimates:
+        assert e.identifiable and abs(e.value - TRUE[e.key]) <= 2 * e.se, e
+
+
 def test_irregular_frame_times_are_interpolated_as_the_solver_integrates():
     """Frames at jittered times (no common grid): the samples between frames interpolated with angles and rates
     agree with stepping the solver to each frame's time exactly."""
