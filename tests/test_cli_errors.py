@@ -26,6 +26,7 @@ from hypothesis import strategies as st
 from grapefmu.errors import GrapefmuError, SceneError
 from grapefmu.scenefile import default_scene_path, load_scene, parse_scene, scene_from_dict
 
+DEFAULT = str(default_scene_path())
 DEFAULT_TEXT = default_scene_path().read_text(encoding="utf-8")
 DEFAULT_DOC = tomllib.loads(DEFAULT_TEXT)
 FUZZ = settings(derandomize=True, deadline=None, database=None, print_blob=False,
@@ -154,12 +155,27 @@ def test_bad_plot_is_refused_before_the_run(tmp_path, plot, words):
     (["paper", "--out", "afile"], "paper", ["--out afile", "not a directory"]),
     (["bench", "--out", "report.txt"], "bench", ["--out report.txt", ".md"]),
     (["bench", "--plots", "afile"], "bench", ["--plots afile"]),
+    (["fit", "missing.toml", "m.csv", "--param", "contact.stiffness", "-o", "f.toml"], "fit", ["missing.toml"]),
+    (["fit", DEFAULT, "missing.csv", "--param", "contact.stiffness", "-o", "f.toml"], "fit",
+     ["missing.csv", "cannot read"]),
+    (["fit", DEFAULT, "m.csv", "--param", "gravity", "-o", "f.toml"], "fit", ["--param", "'gravity'", "allowed"]),
+    (["fit", DEFAULT, "m.csv", "--param", "contact.stiffness", "-o", "f.csv"], "fit", ["--output f.csv", ".toml"]),
+    (["fit", DEFAULT, "m.csv", "--param", "contact.stiffness", "--param", "contact.stiffness", "-o", "f.toml"], "fit",
+     ["set the same value"]),
+    (["risk", DEFAULT], "risk", ["--fit", "--range"]),
+    (["risk", DEFAULT, "--range", "contact.stiffness=5"], "risk", ["--range", "KEY=LOW:HIGH"]),
+    (["risk", DEFAULT, "--range", "contact.restitution=0.2:1.5"], "risk", ["--range", "0 < LOW < HIGH < 1"]),
+    (["risk", DEFAULT, "--range", "contact.stiffness=1:2", "--max-bruise", "0.01", "--samples", "10"], "risk",
+     ["--max-bruise", "samples are needed"]),
+    (["risk", DEFAULT, "--fit", "missing.json"], "risk", ["--fit missing.json", "cannot read"]),
+    (["risk", DEFAULT, "--range", "contact.stiffness=1:2", "--scales", "2:1"], "risk", ["--scales 2:1"]),
     (["simulate", "--no-such-flag"], "simulate", ["unrecognized arguments"]),
     (["no-such-command"], "", ["invalid choice"]),
 ])
 def test_every_command_refuses_in_one_line(tmp_path, args, command, words):
     (tmp_path / "afile").write_text("")
     (tmp_path / "latin1.toml").write_bytes(b"scene = \"caf\xe9.toml\"\n")
+    (tmp_path / "m.csv").write_text("time_s,angle_left_rad\n" + "".join(f"{k / 100},0.0\n" for k in range(20)))
     (tmp_path / "spec.toml").write_text(f'scene = "{default_scene_path()}"\n[[parameters]]\nkey = "gravity"\n'
                                         'values = [9.81]\n')
     r = cli(*args, cwd=tmp_path)

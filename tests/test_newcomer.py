@@ -179,6 +179,9 @@ ENTRY_POINTS = {
     "sweep": ([GRAPEFMU, "sweep", "{tmp}/long.toml", "--workers", "2"], 76, signal.SIGINT, True,
               r"sweep: \d+ runs", 0.5, r"grapefmu sweep: interrupted; .*\d+ finished run\(s\) kept in "
                                      r".*journal.jsonl; run the same command again to resume"),
+    "risk": ([GRAPEFMU, "risk", "{tmp}/row.toml", "--range", "contact.stiffness=1000:4000", "--samples", "5000",
+              "--workers", "1", "--out", "{tmp}/risk"], 78, signal.SIGINT, True, r"sweep: \d+ runs", 0.5,
+             r"grapefmu risk: interrupted; .*the finished runs are kept in .*; run the same command again to resume"),
     "replay --publish": ([GRAPEFMU, "replay", str(ROOT / "recordings" / "open_loop.mcap"), "--publish", "--rate",
                           "0.2"], 77, signal.SIGINT, True, None, 4.0, r"^grapefmu replay: interrupted$"),
 }
@@ -189,7 +192,7 @@ def test_long_running_entry_points_stop_cleanly(name, tmp_path):
     """SIGINT (to the process group, as Ctrl-C sends it) or SIGTERM (to the process): the process ends within
     5 s, prints one line saying so and no traceback, and leaves no child running."""
     args, domain, sig, group, ready, wait, final = ENTRY_POINTS[name]
-    if name == "sweep":
+    if name in ("sweep", "risk"):
         _sweep_spec(tmp_path)
     args = [a.replace("{tmp}", str(tmp_path)) for a in args]
     env = {**os.environ, **ROS_ENV, "ROS_DOMAIN_ID": str(domain)}
@@ -198,8 +201,8 @@ def test_long_running_entry_points_stop_cleanly(name, tmp_path):
         deadline = time.monotonic() + 60
         while ready and not w.said(ready) and w.p.poll() is None and time.monotonic() < deadline:
             time.sleep(0.1)
-        if name == "sweep":  # stopped in the middle: some runs finished, most not
-            journal = tmp_path / "long.parquet.journal.jsonl"
+        if name in ("sweep", "risk"):  # stopped in the middle: some runs finished, most not
+            journal = tmp_path / ("long.parquet.journal.jsonl" if name == "sweep" else "risk/row.parquet.journal.jsonl")
             while w.p.poll() is None and time.monotonic() < deadline and \
                     (not journal.exists() or len(journal.read_text().splitlines()) < 3):
                 time.sleep(0.1)
@@ -287,7 +290,8 @@ def test_every_command_has_a_description_and_the_default_of_every_option():
     import argparse
     ap = build_parser()
     sub = next(a for a in ap._actions if isinstance(a, argparse._SubParsersAction))
-    assert set(sub.choices) == {"simulate", "paper", "cluster", "sweep", "build-fmu", "replay", "outputs", "bench"}
+    assert set(sub.choices) == {"simulate", "paper", "cluster", "sweep", "fit", "risk", "build-fmu", "replay",
+                                "outputs", "bench"}
     for name, p in sub.choices.items():
         page = p.format_help()
         assert p.description and p.description.endswith("."), name
@@ -448,8 +452,8 @@ def _run_for_plot(berries: int):
 
 @pytest.mark.parametrize("berries", [2, 12])
 def test_plot_legends_sit_beside_their_panels_and_clusters_have_a_colour_bar(berries):
-    from grapefmu.results.plot import _pyplot, figure
-    plt = _pyplot()
+    from grapefmu.results.plot import pyplot, figure
+    plt = pyplot()
     fig = figure(_run_for_plot(berries))
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shlex
 import signal
 import sys
 import threading
@@ -188,6 +189,91 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_fit(a: argparse.Namespace) -> int:
+    from .fit import fit, parameters, read_measured
+    from .fit.report import check_outputs, plot_residuals, table, write_json, write_scene
+    from .scenefile import load_scene
+    from .scenefile.parse import loads_toml, read_text
+
+    check_outputs(a.output, a.report, a.plot)
+    if not 1 <= a.segments <= 1000:
+        raise GrapefmuError(f"--segments: expected an integer in [1, 1000], got {a.segments}")
+    scene = load_scene(a.scene)
+    doc = loads_toml(read_text(a.scene), a.scene)
+    params = parameters(a.param or [], doc)
+    series = [read_measured(d, scene.model) for d in a.data]
+    _compiling()
+    start = time.perf_counter()
+
+    def progress(n: int, rms: float) -> None:  # after a second, one line on stderr updated per evaluation
+        wall = time.perf_counter() - start
+        if wall >= 1.0:
+            sys.stderr.write(f"\rfit: {n} evaluations, residual rms {rms:.3g} rad, wall {wall:.1f} s ")
+            sys.stderr.flush()
+            Progress.open_line = True
+
+    res = fit(doc, Path(a.scene).parent, params, series, segments=a.segments, progress=progress,
+              **({"rtol": a.rtol} if a.rtol is not None else {}), **({"atol": a.atol} if a.atol is not None else {}))
+    if Progress.open_line:
+        print(_newline(), end="", file=sys.stderr)
+    tracked = sorted({d for m in series for d in m.dofs})
+    print(f"fit: {len(series)} series, {res.residuals} measured angles ({', '.join(tracked)}), {len(params)} "
+          f"parameter(s) and the start states ({res.unknowns} unknowns informed by the data); {res.iterations} "
+          f"evaluations, {res.seconds:.1f} s")
+    print(f"  residual standard deviation {res.sigma:.3g} rad; condition number of JᵀJ {res.condition:.3g}")
+    print(table(res))
+    for w in res.warnings:
+        print(f"warning: {w}")
+    sources = [str(d) for d in a.data]
+    write_scene(res, a.output, sources)
+    print(f"wrote {a.output}")
+    if a.report:
+        write_json(res, a.report, a.scene, sources)
+        print(f"wrote {a.report}")
+    if a.plot:
+        plot_residuals(res, a.plot)
+        print(f"wrote {a.plot}")
+    return 0
+
+
+def cmd_risk(a: argparse.Namespace) -> int:
+    from .risk import assess, distribution
+    from .risk.montecarlo import plan_doc
+
+    out = check_target(a.out, None, "--out")
+    if a.workers is not None and not 0 <= a.workers <= 1024:
+        raise GrapefmuError(f"--workers: expected an integer in [0, 1024], got {a.workers}")
+    scales = _pair(a.scales, "--scales")
+    dist = distribution(plan_doc(a.plans[0])[0], a.fit, a.range or [])
+    say = lambda line: print(f"{_newline()}{line}", file=sys.stderr, flush=True)  # noqa: E731
+    try:
+        r = assess(a.plans, dist, a.samples, a.seed, out, max_bruise=a.max_bruise, scales=scales, workers=a.workers,
+                   scheduler=a.scheduler, say=say, command="grapefmu " + shlex.join(a.argv))
+    except KeyboardInterrupt as e:
+        e.note = (f"the finished runs are kept in {out} (a journal per interrupted sweep, a table per finished "
+                  "one); run the same command again to resume")
+        raise
+    for o in r.outcomes:
+        print(f"{o.plan}: P(bruise) = {o.bruise.text()}, P(detachment) = {o.detach.text()}"
+              + (f"; {len(o.failed)} run(s) did not finish" if o.failed else ""))
+    if r.search is not None:
+        print(f"search: {r.search.note}")
+    for f in r.files:
+        print(f"wrote {f}")
+    return 0
+
+
+def _pair(text: str, option: str) -> tuple[float, float]:
+    lo, _, hi = text.partition(":")
+    try:
+        a, b = float(lo), float(hi)
+    except ValueError:
+        a = b = math.nan
+    if not (math.isfinite(a) and math.isfinite(b) and 0 < a < b):
+        raise GrapefmuError(f"{option} {text}: expected LOW:HIGH with 0 < LOW < HIGH")
+    return a, b
+
+
 def cmd_paper(a: argparse.Namespace) -> int:
     from .paper.reproduce import reproduce
     out = check_target(a.out, None, "--out")
@@ -280,6 +366,10 @@ COMMANDS = {  # name: one-line description (also the --help page's first line)
     "paper": "Reproduce tests 1–9 of Xu et al. (2025): figures and a check of each of the paper's claims.",
     "cluster": "Generate a cluster scene (seeded, spherical twigs) or a planar row of berries as a scene TOML.",
     "sweep": "Run a grid or Monte Carlo sweep over scene parameters, one Parquet row per run (resumable).",
+    "fit": "Estimate scene parameters (hinge, contact, coupling) from measured swings by least squares on the "
+           "solver: estimates, standard errors, correlations, residual plots and a fitted scene TOML.",
+    "risk": "Probability of bruising and detachment for handling plans under uncertain parameters (Monte Carlo on "
+            "the sweep engine, resumable), plans side by side, and the fastest plan under a bruise bound.",
     "build-fmu": "Package a scene as an FMI 2 or 3 co-simulation FMU.",
     "replay": "Check a recording by re-simulating it, or republish its topics on ROS 2.",
     "outputs": "List every output channel (name, unit, file column, ROS topic, FMU causality) as Markdown.",
@@ -341,6 +431,43 @@ def build_parser() -> argparse.ArgumentParser:
     w.add_argument("--scheduler", metavar="ADDRESS",
                    help="a Dask distributed scheduler, tcp://host:port, instead of local processes (default: none)")
     w.set_defaults(func=cmd_sweep)
+    f = command("fit", "The measured CSV has the simulator's columns: time_s, angle_<angle>_rad per tracked angle, and "
+                       "optionally base_ax_m_s2 and base_az_m_s2 (the gripper). docs/fit_and_risk.md")
+    f.add_argument("scene", help="scene TOML: the rig, its initial state (a starting guess) and starting values")
+    f.add_argument("data", nargs="+", help="measured CSV, one per recorded series")
+    f.add_argument("--param", action="append", metavar="KEY", required=True,
+                   help="a parameter to estimate, given again for more: berries[*].hinge_stiffness (shared), "
+                        "berries[0].hinge_damping (one twig), contact.stiffness, contact.restitution, "
+                        "contact.damping, coupling.stiffness, ... (required)")
+    f.add_argument("-o", "--output", required=True, metavar="FILE", help="the fitted scene TOML to write (required)")
+    f.add_argument("--report", metavar="FILE", help="a JSON report: estimates, covariance, what risk --fit reads "
+                                                     "(default: none)")
+    f.add_argument("--plot", metavar="FILE", help="residual plots, .png, .pdf or .svg (default: none)")
+    f.add_argument("--segments", type=int, default=1,
+                   help="cut each series into this many pieces, each started from its own estimated state")
+    f.add_argument("--rtol", type=float, help="the solver's relative tolerance while fitting (default: 1e-10)")
+    f.add_argument("--atol", type=float, help="the solver's absolute tolerance while fitting (default: 1e-12)")
+    f.set_defaults(func=cmd_fit)
+    k = command("risk", "Every plan runs over the same draws. Probabilities carry 95 % Clopper–Pearson intervals. "
+                        "docs/fit_and_risk.md")
+    k.add_argument("plans", nargs="+", help="scene TOMLs, one per handling plan (their excitation is the plan)")
+    k.add_argument("--fit", metavar="FILE", help="the parameters' distribution from a fit (grapefmu fit --report): "
+                                                 "normal in log p with the fit's covariance (default: none)")
+    k.add_argument("--range", action="append", metavar="KEY=LOW:HIGH",
+                   help="a parameter drawn log-uniformly (the restitution logit-uniformly) in [LOW, HIGH]; replaces "
+                        "the fit's distribution for that key; give it again for more (default: none)")
+    k.add_argument("--samples", type=int, default=200, help="draws (runs per plan)")
+    k.add_argument("--seed", type=int, default=1, help="seed of the draws")
+    k.add_argument("--out", default="out/risk", metavar="DIR",
+                   help="directory for the tables (one per plan and searched scale), risk.md, risk.json, risk.png")
+    k.add_argument("--max-bruise", type=float, metavar="P",
+                   help="search the first plan's fastest duration whose bruise probability is shown at most P "
+                        "(default: no search)")
+    k.add_argument("--scales", default="0.25:4", metavar="LOW:HIGH",
+                   help="the time scales the search considers (moves' durations times the scale)")
+    k.add_argument("--workers", type=int, help="local worker processes, 0: this process (default: one per core)")
+    k.add_argument("--scheduler", metavar="ADDRESS", help="a Dask scheduler, tcp://host:port (default: none)")
+    k.set_defaults(func=cmd_risk)
     b = command("build-fmu")
     b.add_argument("scene", nargs="?", help="scene TOML (default: the packaged default scene)")
     b.add_argument("-o", "--output", required=True, metavar="FILE", help="the .fmu file to write (required)")
@@ -441,6 +568,7 @@ def _explain(e: BaseException) -> tuple[str, int]:
 
 #: what each command writes (argument names), named when a run is interrupted
 TARGETS = {"simulate": ("out", "plot"), "cluster": ("output",), "sweep": ("output",), "build-fmu": ("output",),
+           "fit": ("output", "report", "plot"), "risk": ("out",),
            "paper": ("out",), "bench": ("out", "plots")}
 
 
@@ -476,6 +604,7 @@ def _interrupted(a: argparse.Namespace, before: dict[str, tuple | None]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
+    a.argv = list(sys.argv[1:] if argv is None else argv)  # as typed: a report names the command that made it
     cmd = f"grapefmu {a.command}"
     before = {p: _stamp(p) for p in _targets(a)}
     handlers = {}

@@ -32,3 +32,8 @@ class StateError(GrapefmuError, ValueError):
 class RecordingError(GrapefmuError):
     """A recording cannot be written or read as asked (an unknown message field, a topic of another type,
     a file that is not a grapefmu MCAP recording)."""
+
+
+class DataError(GrapefmuError, ValueError):
+    """A measured time series (the CSV `grapefmu fit` reads) cannot be used as given; the message names the
+    file, the column and the row."""

@@ -159,8 +159,8 @@ def _agreement_row(name, agree):
 
 
 def plot(rows: list[Row], out_dir: Path) -> list[Path]:
-    from ..results.plot import _pyplot
-    plt = _pyplot()
+    from ..results.plot import pyplot
+    plt = pyplot()
     out_dir.mkdir(parents=True, exist_ok=True)
     files = []
     for scene in dict.fromkeys(r.scene for r in rows):

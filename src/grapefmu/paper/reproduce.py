@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..scenefile import load_scene
-from ..results.plot import _pyplot
+from ..results.plot import pyplot
 from ..results.run import Run
 from ..results.writers import atomic_path
 from ..solver.api import simulate
@@ -125,7 +125,7 @@ def check_claims(r: dict[str, Run]) -> list[Claim]:
 
 
 def draw_figures(r: dict[str, Run], out: Path) -> list[Path]:
-    plt = _pyplot()
+    plt = pyplot()
     files = []
 
     def save(fig, name):

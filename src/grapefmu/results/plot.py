@@ -18,11 +18,21 @@ def check_plot(path: str | Path, option: str = "plot") -> Path:
     return check_target(path, PLOT_TYPES, option)
 
 
-def _pyplot():
+def pyplot():
+    """matplotlib's pyplot on the Agg backend (no display needed)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
+
+
+def save(fig, path: str | Path) -> None:
+    """Write a figure to a .png, .pdf or .svg (the type from the suffix) atomically, and close it."""
+    if Path(path).suffix.lower() not in PLOT_TYPES:
+        raise GrapefmuError(f"{path}: unknown figure type {Path(path).suffix!r}; use {one_of(PLOT_TYPES)}")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format=Path(path).suffix.lstrip(".").lower())
+    pyplot().close(fig)
 
 
 #: above this many berries the figure shows envelopes and counts, not one line per berry and pair
@@ -36,13 +46,7 @@ def _legend(ax, **kw) -> None:
 
 def plot_run(run: Run, path: str | Path, title: str | None = None) -> None:
     """The run's figure (`figure`) written to a .png, .pdf or .svg."""
-    if Path(path).suffix.lower() not in PLOT_TYPES:
-        raise GrapefmuError(f"{path}: unknown figure type {Path(path).suffix!r}; use {one_of(PLOT_TYPES)}")
-    plt = _pyplot()
-    fig = figure(run, title)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format=Path(path).suffix.lstrip(".").lower())
-    plt.close(fig)
+    save(figure(run, title), path)
 
 
 def figure(run: Run, title: str | None = None):
@@ -60,7 +64,7 @@ def figure(run: Run, title: str | None = None):
 
 
 def _lines_figure(run: Run):
-    plt = _pyplot()
+    plt = pyplot()
     m = run.scene.model
     th = run.scene.thresholds
     rows = 6 if m.obstacles else 5
@@ -121,7 +125,7 @@ def _impacts_by_surface(run: Run, ax) -> None:
 def _cluster_figure(run: Run):
     """A cluster: the berries at rest and at their largest swing (coloured by pedicel tension, one scale), force
     and tension envelopes against the thresholds, pairs in contact, energy per berry and the rachis input."""
-    plt = _pyplot()
+    plt = pyplot()
     th = run.scene.thresholds
     t = run.t
     obstacles = bool(run.scene.model.obstacles)

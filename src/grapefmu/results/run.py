@@ -155,6 +155,14 @@ class Run:
             out[m.pairs[p].j] += 0.5 * d
         return out
 
+    def bruised_berries(self) -> list[str]:
+        """The berries (names, in the scene's order) in at least one bruising impact: both berries of its pair (an
+        obstacle is not a berry)."""
+        m = self.scene.model
+        hit = {b for p in self.impacts.pair[self.impacts.bruising] for b in (m.pairs[p].i, m.pairs[p].j)
+               if b < m.n_berries}
+        return [m.names[i] for i in sorted(hit)]
+
     def summary(self) -> dict[str, Any]:
         """The catalogue's cluster channels at the end of the run, the berries over the detachment force,
         impact and per-berry figures, what the solver did, and `warnings` (results/trust.py). A quantity's key
@@ -178,7 +186,7 @@ class Run:
             "detached_berries": [names[i] for i in np.flatnonzero(over)],
             "fatigue_impacts": int(fatigue(imp.peak_force, self.bruise_thresholds[imp.pair.astype(int), 0],
                                            th.fatigue_fraction).sum()),
-            "damage_risk": bool(imp.bruising.any()),
+            "damage_risk": bool(imp.bruising.any()), "bruised_berries": self.bruised_berries(),
             unit("max_impact_energy", "J"): float(imp.dissipated.max()) if len(imp) else 0.0,
             unit("max_dissipated_per_berry", "J"): float(per_berry.max()),
             unit("mean_dissipated_per_berry", "J"): float(per_berry.mean()),

@@ -3,6 +3,8 @@
 Rows are appended to `<output>.journal.jsonl` (flushed and fsynced per row) as runs finish. An
 interrupted sweep started again with the same spec and output skips the runs already in the
 journal; the Parquet file is written atomically, sorted by run_id, only when every run is done.
+`workers=0` runs every run in the calling process (no process to start: small sweeps, tests, a caller that
+runs many short sweeps one after another, as risk/ does).
 """
 from __future__ import annotations
 
@@ -37,7 +39,8 @@ def run_sweep(spec: SweepSpec, output: str | Path, *, workers: int | None = None
     todo = [k for k in range(len(runs)) if k not in done]
     client = _connect(scheduler) if scheduler else None  # an unreachable scheduler: refused before any file is written
     try:
-        where = f"Dask scheduler {scheduler}" if scheduler else f"{workers or os.cpu_count()} local processes"
+        where = (f"Dask scheduler {scheduler}" if scheduler else "this process" if workers == 0
+                 else f"{workers or os.cpu_count()} local processes")
         _say(progress, f"sweep: {len(runs)} runs ({spec.mode}) of {spec.base.get('name', 'scene')} on {where}")
         if done:
             _say(progress, f"sweep: resuming, {len(done)} of {len(runs)} runs already done")
@@ -102,6 +105,9 @@ def _execute(spec: SweepSpec, runs: list[dict], todo: list[int], workers: int | 
                                          key=f"grapefmu-run-{spec.fingerprint}-{k}", pure=False)
         window = 4 * max(sum(client.nthreads().values()), 1)
         yield from _windowed(submit, todo, window, lambda fs: wait(fs, return_when="FIRST_COMPLETED"))
+        return
+    if workers == 0:
+        yield from (run_one(k, scene_doc(spec, runs[k]), base_dir) for k in todo)
         return
     yield from _local(spec, runs, todo, workers or os.cpu_count() or 1, base_dir)
 

@@ -1,7 +1,7 @@
 """The sweep specification (TOML) and the runs it expands to.
 
     scene = "cluster.toml"         # the base scene, relative to this file
-    mode = "grid"                  # or "monte-carlo"
+    mode = "grid"                  # or "monte-carlo", or "list" (run k takes the k-th value of every parameter)
     samples = 200                  # monte-carlo: number of runs
     seed = 1                       # monte-carlo: the draws are fixed by the seed
 
@@ -34,9 +34,10 @@ KEY_RE = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d{1,9}|\*)\])?")
 SPEC_KEYS = {"scene", "mode", "samples", "seed", "parameters"}
 PARAM_KEYS = {"key", "values", "distribution", "low", "high", "mean", "sd", "shared"}
 MAX_RUNS = 1_000_000
-#: changes when the same spec text expands to different runs (2: per-element draws for [*] keys), so a
-#: journal or table of an older expansion is never mixed in
-FORMAT = 2
+#: changes when the same spec text expands to different runs or rows (2: per-element draws for [*] keys; 3: the
+#: rows name the bruised and detached berries), so a journal or table of an older expansion is never mixed in
+FORMAT = 3
+MODES = ("grid", "monte-carlo", "list")
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,8 @@ class SweepSpec:
         keys = [p.key for p in self.parameters]
         if self.mode == "grid":
             return [dict(zip(keys, combo)) for combo in itertools.product(*(p.values for p in self.parameters))]
+        if self.mode == "list":
+            return [dict(zip(keys, row)) for row in zip(*(p.values for p in self.parameters))]
         rng = np.random.default_rng(self.seed)
         return [{p.key: p.draw(rng) for p in self.parameters} for _ in range(self.samples)]
 
@@ -95,18 +98,29 @@ def load_spec(path: str | Path) -> SweepSpec:
     scene_path = path.parent / doc["scene"]
     scene_text = read_text(scene_path)
     base = loads_toml(scene_text, str(scene_path))
-    mode = v.choice("mode", doc.get("mode", "grid"), ("grid", "monte-carlo"))
+    mode = v.choice("mode", doc.get("mode", "grid"), MODES)
     raw = doc.get("parameters")
     if not isinstance(raw, list) or not raw:
         raise SceneError("parameters", "expected at least one [[parameters]] table")
     params = tuple(_parameter(f"parameters[{n}]", p, mode, base) for n, p in enumerate(raw))
-    if len({p.key for p in params}) != len(params):
-        raise SceneError("parameters", "a key is swept twice")
     samples = v.integer("samples", doc.get("samples", 100), 1, MAX_RUNS) if mode == "monte-carlo" else 0
     seed = v.integer("seed", doc.get("seed", 1), 0, 2**63 - 1)
-    spec = SweepSpec(base, scene_path.parent, mode, params, samples, seed, text + "\n---\n" + scene_text)
-    if mode == "grid" and np.prod([len(p.values) for p in params], dtype=float) > MAX_RUNS:
+    return checked(SweepSpec(base, scene_path.parent, mode, params, samples, seed, text + "\n---\n" + scene_text))
+
+
+def checked(spec: SweepSpec) -> SweepSpec:
+    """A spec, read from a file or built in code (risk/), whose runs can be expanded: no key twice, a grid of at
+    most MAX_RUNS runs, a list whose parameters have one value per run each."""
+    params = spec.parameters
+    if len({p.key for p in params}) != len(params):
+        raise SceneError("parameters", "a key is swept twice")
+    if spec.mode == "grid" and np.prod([len(p.values) for p in params], dtype=float) > MAX_RUNS:
         raise SceneError("parameters", f"the grid has more than {MAX_RUNS} runs")
+    if spec.mode == "list":
+        for n, p in enumerate(params):
+            if len(p.values) != len(params[0].values):
+                raise SceneError(f"parameters[{n}].values", f"a list sweep takes one value per run: "
+                                 f"{len(params[0].values)} in parameters[0], {len(p.values)} here")
     return spec
 
 
@@ -116,18 +130,18 @@ def _parameter(key: str, raw: Any, mode: str, base: dict) -> Parameter:
     path = raw.get("key")
     if not isinstance(path, str):
         raise SceneError(f"{key}.key", "expected a path into the scene such as \"contact.stiffness\"")
-    slots = len(_slots(copy.deepcopy(base), path, f"{key}.key"))  # the path exists in the base scene
-    dist = raw.get("distribution", "grid" if mode == "grid" else None)
-    if mode == "grid":
+    count = len(slots(copy.deepcopy(base), path, f"{key}.key"))  # the path exists in the base scene
+    dist = raw.get("distribution", "grid" if mode != "monte-carlo" else None)
+    if mode != "monte-carlo":
         if dist != "grid":
-            raise SceneError(f"{key}.distribution", "a grid sweep takes values lists only")
+            raise SceneError(f"{key}.distribution", f"a {mode} sweep takes values lists only")
         if "shared" in raw:
-            raise SceneError(f"{key}.shared", "a grid sweep sets every element of a [*] key to each value; "
+            raise SceneError(f"{key}.shared", f"a {mode} sweep sets every element of a [*] key to each value; "
                                               "shared is for monte-carlo")
         return Parameter(path, _values(f"{key}.values", raw.get("values")))
     dist = v.choice(f"{key}.distribution", dist, ("uniform", "normal", "choice"))
     shared = v.boolean(f"{key}.shared", raw.get("shared", False))
-    each = slots if "[*]" in path and not shared else 0
+    each = count if "[*]" in path and not shared else 0
     if dist == "choice":
         return Parameter(path, _values(f"{key}.values", raw.get("values")), "choice", each=each)
     if dist == "uniform":
@@ -147,12 +161,12 @@ def _values(key: str, raw: Any) -> tuple[Any, ...]:
     return tuple(raw)
 
 
-def _slots(doc: dict, path: str, where: str = "key") -> list[tuple[Any, Any]]:
+def slots(doc: dict, path: str, where: str = "key") -> list[tuple[Any, Any]]:
     """Every (container, name or index) a dotted path reaches in doc, in document order; [*] reaches every
     element of a list."""
     parts = path.split(".")
     targets: list[Any] = [doc]
-    slots: list[tuple[Any, Any]] = []
+    found: list[tuple[Any, Any]] = []
     for n, part in enumerate(parts):
         m = KEY_RE.fullmatch(part)
         if not m:
@@ -166,7 +180,7 @@ def _slots(doc: dict, path: str, where: str = "key") -> list[tuple[Any, Any]]:
                                         "(write the key into the scene, with its default, to sweep it)")
             if index is None:
                 if last:
-                    slots.append((t, name))
+                    found.append((t, name))
                 else:
                     nxt.append(t[name])
                 continue
@@ -178,19 +192,24 @@ def _slots(doc: dict, path: str, where: str = "key") -> list[tuple[Any, Any]]:
                 if i >= len(seq):
                     raise SceneError(where, f"{path!r}: {name!r} has only {len(seq)} entries")
                 if last:
-                    slots.append((seq, i))
+                    found.append((seq, i))
                 else:
                     nxt.append(seq[i])
         targets = nxt
-    return slots
+    return found
+
+
+def values_at(doc: dict, path: str, where: str = "key") -> list[Any]:
+    """The values a dotted path reaches in doc, in document order (one for a plain key, one per element for [*])."""
+    return [container[name] for container, name in slots(doc, path, where)]
 
 
 def apply(doc: dict, path: str, value: Any, where: str = "key", each: bool = False) -> None:
     """Set doc at a dotted path; [*] sets every element of a list (with `each`, element k to value[k])."""
-    slots = _slots(doc, path, where)
-    if each and (not isinstance(value, list) or len(value) != len(slots)):
-        raise SceneError(where, f"{path!r}: expected {len(slots)} values, one per element, got {value!r}")
-    for k, (container, name) in enumerate(slots):
+    reached = slots(doc, path, where)
+    if each and (not isinstance(value, list) or len(value) != len(reached)):
+        raise SceneError(where, f"{path!r}: expected {len(reached)} values, one per element, got {value!r}")
+    for k, (container, name) in enumerate(reached):
         container[name] = value[k] if each else value
 
 
