@@ -141,7 +141,7 @@ def build_fmu(scene_path: str | Path, out: str | Path, fmi: int = 2, outputs: st
                                       src / shim.PYTHON_FILE], tmp / "out", fmi)
         with zipfile.ZipFile(built) as z:
             entries = {n: z.read(n) for n in z.namelist()}
-        for f in bundle.rglob("__pycache__/*.nb[ic]"):  # pythonfmu leaves __pycache__ out
+        for f in _live_cache_files(bundle):  # pythonfmu leaves __pycache__ out
             entries[f"resources/bundle/{f.relative_to(bundle).as_posix()}"] = f.read_bytes()
         entries["modelDescription.xml"] = _description(entries["modelDescription.xml"], fmi, scene, outputs)
         _install_binary(entries, ident, fmi, tmp)
@@ -169,6 +169,30 @@ def _warm_up(scene: Path) -> None:
     core.initialize()
     core.step(0.0, 1e-3)
     core.set_state(core.state_from_bytes(core.state_to_bytes(core.get_state())))
+
+
+def _live_cache_files(bundle: Path) -> list[Path]:
+    """The numba cache files of the bundle that its sources can use: each index whose source stamp (the
+    SHA-256 of the module's bytes, as numba 0.68 checks it) matches, and the data files it lists. A working
+    checkout also holds the entries of earlier versions of its functions, which would only make the FMU
+    larger (and past the cross-check's 10 MB)."""
+    import pickle
+
+    import numba
+
+    out = []
+    for index in sorted(bundle.rglob("__pycache__/*.nbi")):
+        source = index.parent.parent / f"{index.name.split('.', 1)[0]}.py"
+        try:
+            with open(index, "rb") as f:
+                version = pickle.load(f)
+                stamp, overloads = pickle.loads(f.read())
+            digest = hashlib.sha256(source.read_bytes()).digest()
+        except (OSError, pickle.UnpicklingError, ValueError, EOFError):
+            continue
+        if version == numba.__version__ and stamp == digest:
+            out += [index, *(index.parent / name for name in overloads.values() if (index.parent / name).exists())]
+    return out
 
 
 def _digest(folder: Path) -> str:
