@@ -55,11 +55,12 @@ PARAMETERS = [
      (0, MAX_ACCEL), False),
     ("marker_rate_hz", 30.0, "MarkerArray rate, Hz (0: none)", (0, 1000), False),
     ("tf_rate_hz", 100.0, "/tf rate, Hz (TF listeners interpolate between transforms)", (1, 10000), False),
-    ("pose_filter_hz", 20.0, "Low-pass cutoff for accelerations differentiated from rachis/pose, Hz", (0.1, 1000),
+    ("pose_filter_hz", 20.0, "Low-pass cutoff for accelerations differentiated from rachis/pose, rachis/twist or "
+     "the gripper's TF frame, Hz", (0.1, 1000),
      False),
     ("record", "", "MCAP file to record every topic to ('' for none)", None, True),
     ("gripper_frame", "", "TF frame of the gripper holding the rachis, looked up on /tf against `world` ('' for "
-     "none: inputs come on rachis/accel or rachis/pose)", None, True),
+     "none: inputs come on rachis/accel, rachis/pose or rachis/twist)", None, True),
 ]
 
 
@@ -106,7 +107,8 @@ class SimulatorNode(Node):
         self.pubs = {t: self.create_publisher(message_class(msgs.topic_type(t)), t, TOPIC_QOS.get(t, STATE_QOS),
                                               event_callbacks=quiet) for t in topics}
         self.full_names = {t: pub.topic_name for t, pub in self.pubs.items()}  # as recordings name them
-        for topic, handler in (("rachis/accel", self.on_accel), ("rachis/pose", self.on_pose)):
+        for topic, handler in (("rachis/accel", self.on_accel), ("rachis/pose", self.on_pose),
+                               ("rachis/twist", self.on_twist)):
             self.create_subscription(message_class(msgs.topic_type(topic)), topic, handler, INPUT_QOS, raw=True)
         self.gripper_frame = gp("gripper_frame")
         if self.gripper_frame:
@@ -141,8 +143,8 @@ class SimulatorNode(Node):
         self._restart_clock()
         self.last_tick = None
         self._last = {}  # rate parameter -> simulated time its topic was last published
-        self._pose = []
-        self._pose_acc = np.zeros(2)
+        self._motion = {2: [], 1: []}  # the last poses (order 2) and velocities (order 1) received
+        self._motion_acc = np.zeros(2)
         stamp = self._stamp(self.solver.t)
         for topic, m in msgs.tf_static(self.scene.model, stamp, self.prefix):
             self.emit(topic, m, stamp)
@@ -237,7 +239,11 @@ class SimulatorNode(Node):
 
     def on_pose(self, data: bytes):
         msg, t = self._received("rachis/pose", data)
-        self._pose_input(t, np.array([msg.pose.position.x, msg.pose.position.z]), "rachis/pose")
+        self._motion_input(t, np.array([msg.pose.position.x, msg.pose.position.z]), 2, "rachis/pose")
+
+    def on_twist(self, data: bytes):
+        msg, t = self._received("rachis/twist", data)
+        self._motion_input(t, np.array([msg.twist.linear.x, msg.twist.linear.z]), 1, "rachis/twist")
 
     def on_tf(self, data: bytes):
         """The gripper frame's pose in `world`, from another node's /tf (this node's own frames are skipped)."""
@@ -248,25 +254,26 @@ class SimulatorNode(Node):
                 if self.recorder:
                     self.recorder.write("/tf", msg.__msgtype__, data, to_ns(max(t, 0.0)))
                 p = tr.transform.translation
-                self._pose_input(t, np.array([p.x, p.z]), f"/tf {self.gripper_frame}")
+                self._motion_input(t, np.array([p.x, p.z]), 2, f"/tf {self.gripper_frame}")
 
-    def _pose_input(self, t: float, p: np.ndarray, what: str):
-        """Acceleration from poses: second difference, then a first-order low-pass at pose_filter_hz."""
-        if not np.all(np.isfinite(p)):
+    def _motion_input(self, t: float, x: np.ndarray, order: int, what: str):
+        """Acceleration from the gripper's positions (order 2: second difference) or velocities (order 1:
+        first difference), then a first-order low-pass at pose_filter_hz."""
+        if not np.all(np.isfinite(x)):
             self._valid(math.nan, math.nan, what)
             return
-        self._pose = (self._pose + [(t, p)])[-3:]
-        if len(self._pose) < 3:
+        seen = self._motion[order] = (self._motion[order] + [(t, x)])[-(order + 1):]
+        if len(seen) <= order:
             return
-        (t0, p0), (t1, p1), (t2, p2) = self._pose
-        if not (t0 < t1 < t2):
+        times = [s[0] for s in seen]
+        if not all(a < b for a, b in zip(times, times[1:])):
             self._valid(math.nan, math.nan, f"{what} (stamps must increase)")
             return
-        v1, v2 = (p1 - p0) / (t1 - t0), (p2 - p1) / (t2 - t1)
-        raw = (v2 - v1) / (0.5 * (t2 - t0))
-        alpha = 1.0 - math.exp(-2 * math.pi * self.get_parameter("pose_filter_hz").value * (t2 - t1))
-        self._pose_acc += alpha * (raw - self._pose_acc)
-        self._input(self._pose_acc[0], self._pose_acc[1], t, what)
+        rates = [(b - a) / (tb - ta) for (ta, a), (tb, b) in zip(seen, seen[1:])]
+        raw = rates[0] if order == 1 else (rates[1] - rates[0]) / (0.5 * (times[2] - times[0]))
+        alpha = 1.0 - math.exp(-2 * math.pi * self.get_parameter("pose_filter_hz").value * (times[-1] - times[-2]))
+        self._motion_acc += alpha * (raw - self._motion_acc)
+        self._input(self._motion_acc[0], self._motion_acc[1], t, what)
 
     # --- real time ------------------------------------------------------------------------------
     def on_tick(self):

@@ -39,7 +39,8 @@ TOPIC_TYPES = {
     "collision_events": "grapefmu_msgs/msg/CollisionEvent", "rachis/accel": "geometry_msgs/msg/AccelStamped",
     "rachis/accel_applied": "geometry_msgs/msg/AccelStamped", "markers": "visualization_msgs/msg/MarkerArray",
     "/clock": "rosgraph_msgs/msg/Clock", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
-    "rachis/pose": "geometry_msgs/msg/PoseStamped", "/tf": "tf2_msgs/msg/TFMessage",
+    "rachis/pose": "geometry_msgs/msg/PoseStamped", "rachis/twist": "geometry_msgs/msg/TwistStamped",
+    "/tf": "tf2_msgs/msg/TFMessage",
     "/tf_static": "tf2_msgs/msg/TFMessage", "robot_description": "std_msgs/msg/String",
     "sim_time": "rosgraph_msgs/msg/Clock",
 }
