@@ -263,7 +263,7 @@ class Solver:
         without it the scene's excitation is used. On failure the state is left unchanged.
 
         The common call (a float step, a tuple of two floats) is checked inline and goes to the compiled
-        side as one Session: a face's step costs about 1 µs more than its physics (docs/benchmarks.md)."""
+        side as one Session: a face's step costs about 1.6 µs more than its physics (docs/solver.md)."""
         if type(dt) is not float or not 0.0 < dt < math.inf:
             dt = _step_size(dt)
         if base_accel is None:
