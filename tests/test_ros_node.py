@@ -352,7 +352,8 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
     assert len(spheres) == 30 and len({round(m.pose.position.z, 6) for m in spheres}) > 10
     assert check(rec).max_deviation == 0.0
     # the recording holds the summary of every state this subscriber received, and the subscriber received every
-    # recorded state but possibly the initial one, published as the node starts (the topic is volatile)
+    # recorded state but possibly the initial one, published as the node starts, before this subscriber may be
+    # matched (the topic is volatile); the input at t = 0 gets its own answer, a second summary at t = 0
     from rosbags.highlevel import AnyReader
 
     from grapefmu.recording.typestore import TYPESTORE
