@@ -163,8 +163,8 @@ def run(quick: bool = False, repeats: int = 5, budget: float = 20.0, log=print):
                 if method.startswith(OWN_RHS) and r.rhs:
                     r.floor = r.rhs * per_rhs / t_end
                 log(f"[{name}] {method} {label}={v:g}: " + (f"FAILED {r.failure}" if r.failure else
-                    f"error {r.error:.2e} rad, {1e3 * r.cost:.3f} ms per simulated s, "
-                    f"{r.over_floor:.1f}× its RHS floor"))
+                    f"error {r.error:.2e} rad, {1e3 * r.cost:.3f} ms per simulated s"
+                    + (f", {r.over_floor:.1f}× its RHS floor" if r.floor > 0 else "")))
         if not quick:
             out, wall = M.fmu_fmpy(sc)
             row = metrics(name, "FMU via fmpy", "1 ms steps", out, wall, ref, t_end)
@@ -221,6 +221,11 @@ def _fmt(x, fmt):
     return "—" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, fmt)
 
 
+def _e(x: float) -> str:
+    """An error target as the text writes it: 1e-6, not 1e-06."""
+    return format(x, ".0e").replace("e-0", "e-")
+
+
 def markdown(rows, refused, compile_s, command, plots, quick, rhs_ns, adv: AdvanceCost) -> str:
     f = _fmt
     lines = ["# Benchmarks: speed against error", "",
@@ -237,7 +242,7 @@ def markdown(rows, refused, compile_s, command, plots, quick, rhs_ns, adv: Advan
         lines += [f"REFUSED (references disagree): {', '.join(f'{k} ({v:.2g} rad)' for k, v in refused.items())}", ""]
     methods = [m for m in dict.fromkeys(r.method for r in rows) if m != "reference check"]
     for target in (1e-6, 1e-10):
-        lines += [f"## Summary: cost at {target:g} rad (interpolated on each work–precision curve)", "",
+        lines += [f"## Summary: cost at {_e(target)} rad (interpolated on each work–precision curve)", "",
                   "| scene | " + " | ".join(methods) + " |", "|---|" + "---|" * len(methods)]
         for scene in dict.fromkeys(r.scene for r in rows):
             base = cost_at([r for r in rows if r.scene == scene and r.method == "grapefmu event"], target)
@@ -282,7 +287,7 @@ def floors(rows: list[Row], rhs_ns: dict[str, float]) -> list[str]:
             sc, name = best_scipy(rows, scene, target)
             theirs = [r for r in rows if r.scene == scene and r.method == name]
             ratio = cost_at(theirs, target, key=lambda r: r.over_floor) if name else math.nan
-            out.append(f"| {scene} | {rhs_ns[scene]:.0f} | {target:g} | {_fmt(1e3 * c, '.3f')} | "
+            out.append(f"| {scene} | {rhs_ns[scene]:.0f} | {_e(target)} | {_fmt(1e3 * c, '.3f')} | "
                        f"{_fmt(1e3 * fl, '.3f')} | {_fmt(c / fl, '.1f')} | {name or 'none reaches it'} | "
                        f"{_fmt(1e3 * sc, '.3g')} ({_fmt(sc / c, '.1f')}×) | {_fmt(ratio, '.1f')} |")
     return out + [""]
@@ -325,11 +330,11 @@ def targets(rows: list[Row], adv: AdvanceCost) -> list[str]:
         c = cost_at(ours_rows, target)
         best, name = best_scipy(rows, sc, target)
         if best == best and c == c:
-            out.append(f"- at least {want}× cheaper than the best scipy driver at {target:g} rad: **{best / c:.1f}×** "
+            out.append(f"- at least {want}× cheaper than the best scipy driver at {_e(target)} rad: **{best / c:.1f}×** "
                        f"({name}, {1e3 * best:.3g} ms against {1e3 * c:.3g} ms), "
                        + ("met." if best / c >= want else "missed."))
         else:
-            out.append(f"- at least {want}× cheaper than the best scipy driver at {target:g} rad: not measured "
+            out.append(f"- at least {want}× cheaper than the best scipy driver at {_e(target)} rad: not measured "
                        "(no setting brackets that error).")
     out.append(f"- `advance(1e-3)` fixed cost at most 2 µs per call: **{1e6 * adv.fixed:.2f} µs**, "
                + ("met." if adv.fixed <= 2e-6 else "missed."))
