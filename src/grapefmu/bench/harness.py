@@ -199,11 +199,13 @@ def plot(rows: list[Row], out_dir: Path) -> list[Path]:
     files = []
     for scene in dict.fromkeys(r.scene for r in rows):
         fig, ax = plt.subplots(figsize=(7, 5), constrained_layout=True)
-        for method in dict.fromkeys(r.method for r in rows if r.scene == scene and r.method != "reference check"):
+        methods = dict.fromkeys(r.method for r in rows if r.scene == scene and r.method != "reference check")
+        for k, method in enumerate(methods):
             pts = [(r.cost * 1e3, r.error) for r in rows if r.scene == scene and r.method == method and not r.failure
                    and r.error > 0 and math.isfinite(r.error)]
-            if pts:
-                ax.loglog(*zip(*sorted(pts)), "o-", label=method, ms=4)
+            if pts:  # ten colours, then the next ten methods dashed with squares
+                ax.loglog(*zip(*sorted(pts)), marker="os^"[k // 10 % 3], ls=("-", "--", ":")[k // 10 % 3],
+                          color=plt.cm.tab10(k % 10), label=method, ms=4)
         ax.axhline(1e-6, color="0.7", ls=":")
         ax.set_xlabel("wall time per simulated second (ms)")
         ax.set_ylabel("largest angle error on a 1 ms grid (rad)")
