@@ -11,29 +11,14 @@ from __future__ import annotations
 import sys
 import time
 
-import numba as nb
 import numpy as np
 
 import grapefmu
 from grapefmu import Solver
+from grapefmu.bench.costs import compiled_steps
 from grapefmu.scenefile import default_scene_path
-from grapefmu.solver.loop import DONE, integrate
 
 N, DT, ACCEL = 2000, 1e-3, (0.5, 0.0)
-
-
-@nb.njit
-def _compiled_loop(s, dt, n):
-    """The same communication points as n calls of advance(dt), without leaving compiled code."""
-    S = s.state
-    inp = S.input[0]
-    inp.held, inp.ax, inp.az = True, 0.5, 0.0
-    for k in range(n):
-        if integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, S.physical.t[0] + dt,
-                     10_000_000) != DONE:
-            return False
-        s.scratch.cursor[0].n_impacts = 0
-    return True
 
 
 def main(path: str) -> None:
@@ -48,7 +33,7 @@ def main(path: str) -> None:
         s.take_impacts()
 
     def compiled():
-        assert _compiled_loop(s._session, DT, N)
+        assert compiled_steps(s._session, DT, N, True, *ACCEL)
 
     def noop():
         for _ in range(N):

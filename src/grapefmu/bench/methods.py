@@ -46,6 +46,14 @@ def scipy_events(scene, integrator, rtol):
     return _from_run(run)
 
 
+def scipy_lean(scene, integrator, rtol):
+    """The lean scipy driver (bench/lean.py): the best peer we can write; no peak-force search."""
+    from .lean import simulate_lean
+    r = simulate_lean(scene, rtol=rtol, atol=rtol * 1e-2, integrator=integrator, output_interval=GRID)
+    d = scene.model.n_dof
+    return Outcome(r.y[:, :d], r.final[: 2 * d], r.onsets, math.nan, r.rhs_evaluations)
+
+
 def mujoco_mjcf(scene, integrator: str, dt: float) -> str:
     """The scene in MJCF: the rod fixed, hinges about −y so that + swings toward +x, point-mass berries
     (explicit inertial, negligible rotational inertia), and one contact pair per berry pair whose soft
