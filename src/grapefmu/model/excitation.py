@@ -136,13 +136,7 @@ def read_csv(path: Path, key: str, hold: bool = False, after: str | None = None)
     next with hold = true, as a sampled controller output is), zero before the first row. After the last
     row: its acceleration kept (after = "hold"), zero (after = "zero"), or, without `after`, undefined: a run
     that goes past it is refused (check_covers)."""
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            raw = [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
-    except OSError as exc:
-        raise SceneError(key, f"cannot read CSV file {path}: {exc.strerror or exc}") from None
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise SceneError(key, f"{path}: not a UTF-8 CSV of time, ax, az ({exc})") from None
+    raw = _csv_rows(path, key, "CSV of time, ax, az")
     if raw and not _is_number(raw[0][0]):
         raw = raw[1:]
     if len(raw) < 2:
@@ -170,6 +164,84 @@ def read_csv(path: Path, key: str, hold: bool = False, after: str | None = None)
     return Excitation(ex.kind, ex.arrays, ex.description, math.inf if after else last, key)
 
 
+#: a pose table's columns: time and position, then an orientation as fixed-axis roll, pitch, yaw (REP-103) or a
+#: quaternion
+POSE_COLUMNS = ("time", "x", "y", "z")
+ORIENTATIONS = (("roll", "pitch", "yaw"), ("qx", "qy", "qz", "qw"))
+#: the largest acceleration a pose table may ask for, m/s² (beyond it the positions jump: a unit or a glitch)
+POSE_MAX_ACCEL = 1e3
+
+
+def read_pose_table(path: Path, key: str) -> Excitation:
+    """The gripper's recorded poses (CSV with a header: time, x, y, z and roll, pitch, yaw or qx, qy, qz, qw; m,
+    rad, s) as the rachis motion. Positions are interpolated by a cubic spline with zero velocity at both ends
+    (C2: its acceleration is piecewise linear, so the excitation is exactly a linear acceleration table and the
+    rachis follows the spline to the solver's tolerance); the spline's error against a smooth motion sampled
+    every h is O(h⁴). Before the first row and after the last the gripper rests, and the rachis' displacement is
+    counted from the first row's position (the world frame is the rachis frame at t = 0).
+
+    The rachis does not yet turn or move sideways (the 6-DoF rachis of issue 13 is not built): a table whose
+    orientation or y changes is refused, naming the row and column."""
+    from scipy.interpolate import CubicSpline
+
+    raw = _csv_rows(path, key, "CSV pose table")
+    if not raw:
+        raise SceneError(key, f"{path}: empty; expected a header {', '.join(POSE_COLUMNS)}, then roll, pitch, yaw "
+                              "or qx, qy, qz, qw")
+    header = [c.strip() for c in raw[0]]
+    orientation = next((o for o in ORIENTATIONS if header == [*POSE_COLUMNS, *o]), None)
+    if orientation is None:
+        raise SceneError(key, f"{path}: header {', '.join(header)}; expected {', '.join(POSE_COLUMNS)} and then "
+                              f"{', '.join(ORIENTATIONS[0])} (rad, fixed axes) or {', '.join(ORIENTATIONS[1])}")
+    if len(raw) < 3:
+        raise SceneError(key, f"{path}: need at least two rows of poses")
+    rows = []
+    for n, r in enumerate(raw[1:], start=1):
+        if len(r) != len(header):
+            raise SceneError(key, f"{path} row {n}: expected {len(header)} values, got {len(r)}")
+        for c, cell in zip(header, r):
+            if not _is_number(cell) or not math.isfinite(float(cell)):
+                raise SceneError(key, f"{path} row {n} column {c}: expected a finite number, got {cell!r}")
+        rows.append([float(c) for c in r])
+    arr = np.array(rows)
+    t = arr[:, 0]
+    for n in range(1, len(t)):
+        if t[n] <= t[n - 1]:
+            raise SceneError(key, f"{path} row {n + 1} column time: {t[n]:g} s is not after row {n}'s {t[n - 1]:g} s "
+                                  "(times must increase strictly: sort the rows, drop repeated ones)")
+    if t[0] < 0:
+        raise SceneError(key, f"{path} row 1 column time: {t[0]:g} s; the table must start at or after 0 s")
+    if orientation == ORIENTATIONS[1]:
+        norm = np.linalg.norm(arr[:, 4:8], axis=1)
+        bad = np.flatnonzero(np.abs(norm - 1.0) > 1e-6)
+        if bad.size:
+            raise SceneError(key, f"{path} row {bad[0] + 1} column qw: the quaternion's norm is {norm[bad[0]]:.9g}; "
+                                  "expected a unit quaternion (within 1e-6)")
+        q = arr[:, 4:8] * np.sign(np.sum(arr[:, 4:8] * arr[0, 4:8], axis=1))[:, None]  # q and −q: the same turn
+        change = np.abs(q - q[0])
+    else:
+        change = np.abs(arr[:, 4:7] - arr[0, 4:7])
+    for columns, moved, what in ((orientation, change, "turns"), (("y",), np.abs(arr[:, 2:3] - arr[0, 2]),
+                                                                  "moves sideways")):
+        rows_moved = np.flatnonzero(moved.max(axis=1) > 1e-9)
+        if rows_moved.size:
+            n = int(rows_moved[0])
+            column = columns[int(np.argmax(moved[n] > 1e-9))]
+            raise SceneError(key, f"{path} row {n + 1} column {column}: the gripper {what} here; this version moves "
+                                  "the rachis in x and z only (rotation and lateral motion: the 6-DoF rachis, not "
+                                  "built yet)")
+    spline = CubicSpline(t, arr[:, [1, 3]], bc_type="clamped")
+    accel = spline(t, 2)
+    worst = int(np.argmax(np.abs(accel).max(axis=1)))
+    if np.abs(accel[worst]).max() > POSE_MAX_ACCEL:
+        raise SceneError(key, f"{path} row {worst + 1} columns x, z: following these positions needs "
+                              f"{np.abs(accel[worst]).max():.3g} m/s² (more than {POSE_MAX_ACCEL:g}): a jump the "
+                              "interpolation cannot follow (a glitch, or positions in mm?)")
+    desc = f"pose table: {path.name}, {len(t)} poses from {t[0]:g} to {t[-1]:g} s, cubic spline"
+    ex = table("pose-table", np.column_stack([t, accel]), desc)
+    return Excitation(ex.kind, ex.arrays, ex.description, math.inf, key)
+
+
 def zero_order_hold(rows: np.ndarray) -> np.ndarray:
     """A staircase as a piecewise-linear table: each value repeated at the next row's time.
     The solver picks the piece from the step's start, so the duplicated knot is never ambiguous."""
@@ -180,6 +252,17 @@ def zero_order_hold(rows: np.ndarray) -> np.ndarray:
     out[1::2, 0] = t[1:]
     out[1::2, 1:] = a[:-1]
     return out
+
+
+def _csv_rows(path: Path, key: str, what: str) -> list[list[str]]:
+    """The rows of a CSV file, comment lines (#) left out; a file that cannot be read is a SceneError on `key`."""
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            return [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
+    except OSError as exc:
+        raise SceneError(key, f"cannot read {what} {path}: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise SceneError(key, f"{path}: not a UTF-8 {what} ({exc})") from None
 
 
 def _is_number(s: str) -> bool:

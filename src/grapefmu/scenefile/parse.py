@@ -43,6 +43,7 @@ EXCITATION_KEYS = {
     "sweep": {"kind", "amplitude", "f_start", "f_stop", "start", "duration"},
     "pick-and-place": {"kind", "moves", "start", "jerk_fraction"},
     "csv": {"kind", "file", "hold", "after"},
+    "pose-table": {"kind", "file"},
 }
 SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events",
                "contact_location"}
@@ -382,6 +383,11 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
         if abs(ex.arrays.table[:, 1:]).max() > acc:
             raise SceneError(f"{key}.file", f"accelerations must stay within ±{acc:g} m/s²")
         return ex
+    if kind == "pose-table":
+        f = raw.get("file")
+        if not isinstance(f, str):
+            raise SceneError(f"{key}.file", f"expected a path to a CSV pose table, got {v.show(f)}")
+        return exc.read_pose_table(base_dir / f, f"{key}.file")
     start = v.number(f"{key}.start", raw.get("start", 0.0), 0.0, 1e5, unit="s")
     if kind == "pick-and-place":
         moves_raw = raw.get("moves")

@@ -1,0 +1,137 @@
+"""Pose tables (issue 13): the gripper's recorded poses as the rachis motion. The rachis follows an analytic
+motion sampled at 100 Hz to the spline's error; the same table drives simulate, the FMU and the ROS node in
+lockstep (fed the table's acceleration, held over each step) to the same trajectory; bad tables are refused
+naming the row and column."""
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grapefmu import GrapefmuError, simulate
+from grapefmu.model.excitation import read_pose_table
+from grapefmu.physics.excitation import accel
+
+from .conftest import dual, scene
+from .test_ros_node import Controller, ros, sim_node  # noqa: F401 - ros: the module's rclpy fixture
+
+ROOT = Path(__file__).resolve().parents[1]
+T, DX, DZ = 0.5, 0.06, -0.03  # s, m: one rest-to-rest move
+
+
+def minimum_jerk(t):
+    """x and z of a minimum-jerk move from rest to rest (an independent analytic motion), m."""
+    s = np.clip(np.asarray(t) / T, 0.0, 1.0)
+    shape = 10 * s**3 - 15 * s**4 + 6 * s**5
+    return DX * shape, DZ * shape
+
+
+def write_table(path: Path, t, x, z, orientation=("roll", "pitch", "yaw"), rows=None) -> Path:
+    values = rows if rows is not None else [
+        [ti, xi, 0.05, zi, *((0.0, 0.0, 0.3) if len(orientation) == 3 else (0.0, 0.0, math.sin(0.15), math.cos(0.15)))]
+        for ti, xi, zi in zip(t, x, z)]
+    path.write_text(",".join(["time", "x", "y", "z", *orientation]) + "\n"
+                    + "".join(",".join(repr(float(v)) if not isinstance(v, str) else v for v in r) + "\n"
+                              for r in values))
+    return path
+
+
+def table_scene(path: Path, t_end: float = 0.8) -> dict:
+    return dual(angles=(0.0, 0.3), excitation={"kind": "pose-table", "file": str(path)},
+                solver={"t_end": t_end, "rtol": 1e-10, "atol": 1e-13})
+
+
+@pytest.mark.parametrize("orientation", [("roll", "pitch", "yaw"), ("qx", "qy", "qz", "qw")])
+def test_the_rachis_follows_a_sampled_motion_to_the_splines_error(tmp_path, orientation):
+    t = np.arange(0.0, T + 1e-9, 0.01)  # a camera or a robot log at 100 Hz
+    path = write_table(tmp_path / "poses.csv", t, *minimum_jerk(t), orientation=orientation)
+    run = simulate(scene(table_scene(path)))
+    x, z = minimum_jerk(run.t)
+    assert np.abs(run.base_displacement[:, 0] - x).max() < 2e-6  # m: the cubic spline's O(h⁴) error
+    assert np.abs(run.base_displacement[:, 1] - z).max() < 2e-6
+    assert np.abs(run.base_displacement[-1] - [DX, DZ]).max() < 1e-9  # at rest where the table ends
+    assert run.collision_count > 0
+
+
+def test_one_table_gives_one_trajectory_through_simulate_the_fmu_and_the_ros_node(ros, tmp_path):
+    """simulate follows the table's spline; the FMU and the node in lockstep get its acceleration held over
+    each 5 ms step. The two held runs agree to round-off, and with the spline to what the hold allows."""
+    from grapefmu.scenefile.toml_out import dumps
+
+    t = np.arange(0.0, T + 1e-9, 0.01)
+    path = write_table(tmp_path / "poses.csv", t, *minimum_jerk(t))
+    ex = read_pose_table(path, "excitation.file")
+    dt, stop = 5e-3, 0.6
+    grid = np.round(np.arange(0.0, stop - 1e-9, dt), 9)
+    held = accel(ex, grid)  # the table's acceleration, held over each step
+    np.savetxt(tmp_path / "held.csv", np.column_stack([grid, held]), delimiter=",", header="time,ax,az",
+               comments="")
+    plain = {k: v for k, v in table_scene(path, stop).items() if k != "excitation"}
+    (tmp_path / "plain.toml").write_text(dumps(plain))
+    subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", str(tmp_path / "plain.toml"), "-o",
+                    str(tmp_path / "plain.fmu")], check=True, capture_output=True, cwd=ROOT)
+    out = subprocess.run([sys.executable, "-m", "tests.fmu_driver", "named", str(tmp_path / "plain.fmu"),
+                          str(tmp_path / "held.csv"), str(stop), str(dt), "angle_left,angle_right"],
+                         check=True, capture_output=True, text=True, cwd=ROOT).stdout
+    fmu = np.array(json.loads(out.split("JSON:", 1)[1])["rows"])[:, 1:]
+
+    with sim_node(tmp_path, record=False, extra=["-p", f"scene:={tmp_path / 'plain.toml'}"]) as (proc, _):
+        ctl = Controller("pose_table_driver")
+        ctl.connect()
+        node = []
+        for k, tk in enumerate([*grid, stop]):
+            ctl.send(tk, *(held[k] if k < len(grid) else (0.0, 0.0)))  # advance to tk, then hold the next value
+            ctl.wait_for(lambda tk=tk: ctl.state_at(tk) is not None)
+            if k:
+                node.append(list(ctl.state_at(tk).position))
+        ctl.close()
+    node = np.array(node)
+
+    held_doc = {**plain, "excitation": {"kind": "csv", "file": str(tmp_path / "held.csv"), "hold": True, "after": "zero"}}
+    core = simulate(scene(held_doc), output_interval=dt)
+    np.testing.assert_allclose(node, fmu, atol=1e-9)  # the same held input, the same solver
+    np.testing.assert_allclose(fmu, core.angles[1:], atol=1e-6)
+
+
+def test_a_held_table_converges_to_the_table_as_the_step_shrinks(tmp_path):
+    """What a master or a controller that holds the table's acceleration over each step gets: first order in
+    the step (berries apart, so no impact amplifies the difference)."""
+    t = np.arange(0.0, T + 1e-9, 0.01)
+    path = write_table(tmp_path / "poses.csv", t, *minimum_jerk(t))
+    doc = {**table_scene(path, 0.6), "berries": dual(d0=0.2)["berries"]}
+    exact = simulate(scene(doc), output_interval=1e-3)
+    ex = read_pose_table(path, "excitation.file")
+    errors = []
+    for dt in (4e-3, 2e-3, 1e-3):
+        grid = np.round(np.arange(0.0, 0.6 - 1e-9, dt), 9)
+        np.savetxt(tmp_path / "held.csv", np.column_stack([grid, accel(ex, grid)]), delimiter=",")
+        held = simulate(scene({**doc, "excitation": {"kind": "csv", "file": str(tmp_path / "held.csv"),
+                                                     "hold": True, "after": "zero"}}), output_interval=1e-3)
+        errors.append(np.abs(held.angles - exact.angles).max())
+    assert errors[0] < 2e-2  # rad: the hold lags the table by half a step
+    assert errors[1] / errors[0] < 0.6 and errors[2] / errors[1] < 0.6, errors  # halving the step halves it
+
+
+@pytest.mark.parametrize("change, where", [
+    (lambda r: r.__setitem__(3, [r[2][0], *r[3][1:]]), "row 4 column time"),      # a repeated time
+    (lambda r: r.__setitem__(5, [r[3][0] - 1e-3, *r[5][1:]]), "row 6 column time"),  # unsorted
+    (lambda r: r[2].__setitem__(3, "nan"), "row 3 column z"),
+    (lambda r: r[4].__setitem__(7, 0.9), "row 5 column qw"),                       # not a unit quaternion
+    (lambda r: r[6].__setitem__(slice(6, 8), [math.sin(0.2), math.cos(0.2)]), "row 7 column qz"),  # it turns
+    (lambda r: r[8].__setitem__(2, 0.06), "row 9 column y"),                       # and moves sideways
+    (lambda r: r[10].__setitem__(1, 5.0), "columns x, z"),                         # a jump: positions in mm?
+])
+def test_bad_pose_tables_are_refused_naming_row_and_column(tmp_path, change, where):
+    t = np.arange(0.0, T + 1e-9, 0.01)
+    x, z = minimum_jerk(t)
+    rows = [[ti, xi, 0.05, zi, 0.0, 0.0, math.sin(0.15), math.cos(0.15)] for ti, xi, zi in zip(t, x, z)]
+    change(rows)
+    path = write_table(tmp_path / "bad.csv", t, x, z, ("qx", "qy", "qz", "qw"), rows=rows)
+    with pytest.raises(GrapefmuError) as err:
+        scene(table_scene(path))
+    assert where in str(err.value) and "bad.csv" in str(err.value)
