@@ -1,6 +1,7 @@
-"""Write the set-down examples: a 20-berry cluster held over a crate (foam floor, hard plastic walls on
-either side), carried 3 cm toward one wall and lowered 4 cm onto the floor, fast and gentle (the same path:
-carried in 0.2 s and lowered in 0.25 s, or carried in 0.6 s and lowered in 1.0 s). Obstacles are planes, so the cluster starts between the walls.
+"""Write the set-down examples: a 20-berry cluster lifted 7 cm, carried 25 cm over a crate's wall and lowered
+into it: a foam floor 3 cm below where the cluster started and hard plastic walls (boxes, 8 cm high) 1 cm from
+the cluster on either side, so that its lowest berries would sink 1 cm into the floor if nothing gave. Fast
+and gentle: the same path in 0.4 + 0.4 + 0.25 s or in 0.8 + 1.0 + 1.0 s.
 Run: .venv/bin/python scripts/setdown_scenes.py   -> scenes/setdown_fast.toml, scenes/setdown_gentle.toml
 The gripper only translates (a tilt on the way needs the 6-DoF rachis of issue 13, not built yet)."""
 from __future__ import annotations
@@ -15,33 +16,35 @@ from grapefmu.scenefile import scene_from_dict
 from grapefmu.scenefile.toml_out import dumps
 
 HERE = Path(__file__).resolve().parents[1] / "scenes"
-CARRY, PRESS = 0.03, 0.01  # m: across, and how far the lowest berry would sink below the floor at the end
+LIFT, CARRY, DROP, PRESS, GAP = 0.07, 0.25, 0.03, 0.01, 0.01  # m
+WALL = (0.01, 0.3, 0.08)  # m: thickness, length, height of a crate wall
 FOAM = {"law": "hunt-crossley", "stiffness": 3e4, "restitution": 0.2, "bruise_force": 2.5, "bruise_energy": 2e-3}
 PLASTIC = {"law": "hunt-crossley", "stiffness": 1e6, "restitution": 0.6, "bruise_force": 1.2, "bruise_energy": 5e-4}
 
 
-def scene(carrying: float, lowering: float, name: str) -> dict:
+def scene(lifting: float, carrying: float, lowering: float, name: str) -> dict:
     doc = cluster_scene(ClusterSpec(berries=20, seed=7, name=name))
     start = Solver(scene_from_dict(doc, HERE)).snapshot().observation.position[0]
     radius = np.array([b["radius"] for b in doc["berries"]])
-    floor = float((start[:, 2] - radius).min()) - 0.03           # 3 cm under the cluster at the start
+    floor = float((start[:, 2] - radius).min()) - DROP
     x_lo, x_hi = float((start[:, 0] - radius).min()), float((start[:, 0] + radius).max())
+    wall = {"kind": "box", "size": list(WALL), **PLASTIC}
     doc["obstacles"] = [
-        {"name": "floor", "point": [0.0, 0.0, floor], "normal": [0.0, 0.0, 1.0], **FOAM},
-        {"name": "near_wall", "point": [x_lo - 0.003, 0.0, floor], "normal": [1.0, 0.0, 0.0], **PLASTIC},
-        {"name": "far_wall", "point": [x_hi + CARRY + 0.003, 0.0, floor], "normal": [-1.0, 0.0, 0.0], **PLASTIC},
+        {"name": "floor", "point": [CARRY, 0.0, floor], "normal": [0.0, 0.0, 1.0], **FOAM},
+        {"name": "near_wall", "centre": [CARRY + x_lo - GAP - WALL[0] / 2, 0.0, floor + WALL[2] / 2], **wall},
+        {"name": "far_wall", "centre": [CARRY + x_hi + GAP + WALL[0] / 2, 0.0, floor + WALL[2] / 2], **wall},
     ]
     doc["excitation"] = {"kind": "pick-and-place", "start": 0.1, "moves": [
-        {"displacement": [CARRY, 0.0], "duration": carrying},
-        {"displacement": [0.0, -(0.03 + PRESS)], "duration": lowering}]}
-    doc["solver"] = {**doc["solver"], "t_end": round(0.1 + carrying + lowering + 0.6, 3)}
+        {"displacement": [0.0, LIFT], "duration": lifting}, {"displacement": [CARRY, 0.0], "duration": carrying},
+        {"displacement": [0.0, -(LIFT + DROP + PRESS)], "duration": lowering}]}
+    doc["solver"] = {**doc["solver"], "t_end": round(0.1 + lifting + carrying + lowering + 0.6, 3)}
     return doc
 
 
 if __name__ == "__main__":
-    for name, carrying, lowering in (("setdown_fast", 0.2, 0.25), ("setdown_gentle", 0.6, 1.0)):
+    for name, durations in (("setdown_fast", (0.4, 0.4, 0.25)), ("setdown_gentle", (0.8, 1.0, 1.0))):
         path = HERE / f"{name}.toml"
         path.write_text("# written by scripts/setdown_scenes.py (a 20-berry cluster set down into a padded crate)\n"
-                        + dumps(scene(carrying, lowering, name)),
+                        + dumps(scene(*durations, name)),
                         encoding="utf-8")
         print(f"wrote {path}")

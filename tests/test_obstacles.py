@@ -12,6 +12,7 @@ from grapefmu import GrapefmuError, Solver, simulate
 from grapefmu.cluster import ClusterSpec, cluster_scene
 
 from .conftest import dual, scene
+from .test_ros_node import QOS, Controller, drive, ros, sim_node  # noqa: F401 - ros: the module's rclpy fixture
 
 FLOOR = {"name": "floor", "point": [0.0, 0.0, -0.05], "normal": [0.0, 0.0, 1.0], "law": "hunt-crossley",
          "stiffness": 2e4, "restitution": 0.3, "bruise_force": 0.25}
@@ -179,3 +180,36 @@ def test_recordings_name_and_draw_the_obstacles(tmp_path):
                 shapes = sorted(x.type for x in m.markers if x.ns == "obstacles")
     assert "finger" in bodies
     assert shapes == [1, 1, 3]  # the floor's square, the box, the capsule's cylinder
+
+
+def test_the_ros_node_names_and_draws_obstacles(ros, tmp_path):
+    """The node in lockstep on the finger-pad scene: contacts and collision events name the pad, the markers
+    draw it where the gripper has carried it, and the node's angles equal the core's on the same inputs."""
+    from grapefmu_msgs.msg import Contacts
+    from visualization_msgs.msg import MarkerArray
+
+    from grapefmu import load_scene
+    from grapefmu.scenefile.toml_out import dumps
+
+    doc = {k: v for k, v in CASES["finger pad on the gripper"].items() if k != "excitation"}
+    (tmp_path / "pad.toml").write_text(dumps(doc))
+    rows = [(k * 0.005, float(8.0 * np.sin(2 * np.pi * 4 * k * 0.005))) for k in range(121)]
+    with sim_node(tmp_path, record=False, extra=["-p", f"scene:={tmp_path / 'pad.toml'}",
+                                                 "-p", "marker_rate_hz:=50.0"]) as (proc, _):
+        ctl = Controller("obstacle_listener")
+        contacts, markers = [], []
+        ctl.node.create_subscription(Contacts, "contacts", contacts.append, QOS)
+        ctl.node.create_subscription(MarkerArray, "markers", markers.append, QOS)
+        ctl.connect()
+        drive(ctl, rows)
+        ctl.spin(0.5)
+        ctl.close()
+    sc = load_scene(tmp_path / "pad.toml")
+    solver = Solver(sc)
+    for (_, a), (t1, _) in zip(rows, rows[1:]):
+        solver.advance(t1 - solver.t, (a, 0.0))
+    np.testing.assert_allclose(list(ctl.state_at(rows[-1][0]).position), solver.angles, atol=1e-9)
+    assert {c.body_b for m in contacts for c in m.contacts} >= {"finger"}
+    pads = [x for m in markers for x in m.markers if x.ns == "obstacles"]
+    assert pads and {x.type for x in pads} == {3}
+    assert np.ptp([x.pose.position.x for x in pads]) > 1e-3  # it moves with the gripper
