@@ -84,6 +84,11 @@ def test_each_surface_bruises_at_its_own_thresholds():
     np.testing.assert_array_equal(run.impacts.bruising, expected)
     # the floor's low threshold makes its impacts bruise where the scene's would not
     assert np.any(floor & run.impacts.bruising & (run.impacts.peak_force < sc.thresholds.bruise_force))
+    by = run.summary()["impacts_by_surface"]  # what the summary (and the CLI) report per surface
+    assert list(by) == ["berry–berry", "floor"]
+    assert by["floor"]["count"] == floor.sum() and by["berry–berry"]["count"] == (~floor).sum()
+    assert by["floor"]["bruising"] == (floor & run.impacts.bruising).sum() > 0
+    assert by["floor"]["peak_force_n"] == run.impacts.peak_force[floor].max()
 
 
 def test_a_cluster_over_a_floor_watches_only_near_pairs():

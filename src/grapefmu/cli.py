@@ -71,6 +71,9 @@ def _summary_table(run) -> str:
          if s["detachment_risk"] else "no"),
         ("bruising impacts", str(s["bruising_impacts"])),
         ("fatigue impacts", str(s["fatigue_impacts"])),
+        *((f"  on {name}", f"{row['count']} impacts, {row['bruising']} bruising, largest {row['peak_force_n']:.4g} N "
+                           f"(bruises at {row['bruise_force_n']:.4g} N)")
+          for name, row in s.get("impacts_by_surface", {}).items()),
     ]
     compiled = _compile_row({**s, "compiled": run.stats.get("compiled")})
     if compiled:

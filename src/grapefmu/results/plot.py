@@ -106,17 +106,13 @@ def _lines_figure(run: Run):
 def _impacts_by_surface(run: Run, ax) -> None:
     """Each impact's peak force at its onset, one colour per surface (between berries, each obstacle) with that
     surface's bruise force; bruising impacts filled."""
-    m = run.scene.model
     imp = run.impacts
-    surfaces = [("berry–berry", run.scene.thresholds.bruise_force)] + [(o.name, o.bruise_force) for o in m.obstacles]
-    which = np.array([max(m.pairs[int(p)].j - m.n_berries + 1, 0) for p in imp.pair], dtype=int)
-    for k, (name, limit) in enumerate(surfaces):
-        sel = which == k
-        hit, soft = sel & imp.bruising, sel & ~imp.bruising
+    for k, (name, row) in enumerate(run.impacts_by_surface().items()):
+        hit, soft = row["impacts"] & imp.bruising, row["impacts"] & ~imp.bruising
         ax.scatter(imp.onset[hit], imp.peak_force[hit], color=f"C{k}", s=18,
-                   label=f"{name}: {int(sel.sum())} impacts, {int(hit.sum())} bruising (filled)")
+                   label=f"{name}: {row['count']} impacts, {row['bruising']} bruising (filled)")
         ax.scatter(imp.onset[soft], imp.peak_force[soft], facecolors="none", edgecolors=f"C{k}", s=18)
-        ax.axhline(limit, color=f"C{k}", ls="--", lw=0.8)
+        ax.axhline(row["bruise_force_n"], color=f"C{k}", ls="--", lw=0.8)
     ax.set_ylabel("impact peak force (N)\n--: its surface's bruise force")
     ax.set_xlabel("impact onset (s)")
     _legend(ax)

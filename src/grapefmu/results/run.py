@@ -155,6 +155,22 @@ class Run:
             out[m.pairs[p].j] += 0.5 * d
         return out
 
+    def impacts_by_surface(self) -> dict[str, dict[str, Any]]:
+        """Per surface an impact can be on, between berries ("berry–berry") then each obstacle by name: its
+        impacts (mask over `impacts`), how many, how many bruised, the largest peak force (N) and its bruise
+        force (N)."""
+        m = self.scene.model
+        imp = self.impacts
+        which = np.array([max(m.pairs[int(p)].j - m.n_berries + 1, 0) for p in imp.pair], dtype=int)
+        surfaces = [("berry–berry", self.scene.thresholds.bruise_force)] + [(o.name, o.bruise_force)
+                                                                             for o in m.obstacles]
+        out = {}
+        for k, (name, limit) in enumerate(surfaces):
+            sel = which == k
+            out[name] = {"impacts": sel, "count": int(sel.sum()), "bruising": int((sel & imp.bruising).sum()),
+                         "peak_force_n": float(imp.peak_force[sel].max(initial=0.0)), "bruise_force_n": limit}
+        return out
+
     def bruised_berries(self) -> list[str]:
         """The berries (names, in the scene's order) in at least one bruising impact: both berries of its pair (an
         obstacle is not a berry)."""
@@ -187,6 +203,9 @@ class Run:
             "fatigue_impacts": int(fatigue(imp.peak_force, self.bruise_thresholds[imp.pair.astype(int), 0],
                                            th.fatigue_fraction).sum()),
             "damage_risk": bool(imp.bruising.any()), "bruised_berries": self.bruised_berries(),
+            **({"impacts_by_surface": {name: {k: v for k, v in row.items() if k != "impacts"}
+                                       for name, row in self.impacts_by_surface().items()}}
+               if self.scene.model.obstacles else {}),
             unit("max_impact_energy", "J"): float(imp.dissipated.max()) if len(imp) else 0.0,
             unit("max_dissipated_per_berry", "J"): float(per_berry.max()),
             unit("mean_dissipated_per_berry", "J"): float(per_berry.mean()),
