@@ -135,3 +135,16 @@ def test_bad_pose_tables_are_refused_naming_row_and_column(tmp_path, change, whe
     with pytest.raises(GrapefmuError) as err:
         scene(table_scene(path))
     assert where in str(err.value) and "bad.csv" in str(err.value)
+
+
+def test_an_fmu_is_not_built_from_a_pose_table_scene(tmp_path):
+    """The FMU is driven by its inputs and would not carry the table's file: refused before anything is written."""
+    from grapefmu.scenefile.toml_out import dumps
+
+    t = np.arange(0.0, T + 1e-9, 0.01)
+    path = write_table(tmp_path / "poses.csv", t, *minimum_jerk(t))
+    (tmp_path / "table.toml").write_text(dumps(table_scene(path)))
+    r = subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", str(tmp_path / "table.toml"), "-o",
+                        str(tmp_path / "x.fmu")], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode != 0 and "pose-table" in r.stderr and "base_ax" in r.stderr
+    assert not (tmp_path / "x.fmu").exists()

@@ -116,8 +116,9 @@ def build_fmu(scene_path: str | Path, out: str | Path, fmi: int = 2, outputs: st
     outputs = outputs or default_outputs(scene.model)
     if outputs not in OUTPUT_SETS:
         raise grapefmu.GrapefmuError(f"outputs: expected one of {', '.join(OUTPUT_SETS)}, got {outputs!r}")
-    if scene.excitation.kind == "csv":
-        raise grapefmu.GrapefmuError("an FMU is driven by its inputs; remove the scene's [excitation] csv table")
+    if scene.excitation.kind in ("csv", "pose-table"):  # a file the FMU would not carry
+        raise grapefmu.GrapefmuError(f"an FMU is driven by its inputs; remove the scene's [excitation] "
+                                     f"{scene.excitation.kind} table (feed its accelerations as base_ax, base_az)")
     out = Path(out)
     ident = model_identifier(scene.name, scene.source + outputs, fmi)
     with tempfile.TemporaryDirectory(prefix="grapefmu_fmu_") as tmp:
