@@ -68,7 +68,7 @@ def compiled_steps(s, dt, n, hold, ax, az):
     inp = S.input[0]
     inp.held, inp.ax, inp.az = hold, ax, az
     for _ in range(n):
-        if integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, S.physical.t[0] + dt,
+        if integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, s.buffers, S.physical.t[0] + dt,
                      10_000_000) != DONE:
             return False
         s.scratch.cursor[0].n_impacts = 0

@@ -7,13 +7,14 @@ switching surface in the mode the state is now in; no step straddles an excitati
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from ..physics.compiled import jit
 from ..physics.dynamics import rhs
 from ..physics.excitation import applied_accel
-from ..physics.kinematics import kinematics, workspace
+from ..physics.kinematics import Workspace, kinematics, workspace
 from .broadphase import keep_valid, rebuild, samples_for
 from .events import N_SAMPLES, classify, find_event, switch_pair
 from .sampling import sample_step
@@ -21,6 +22,34 @@ from .step import dense, dense_coefficients, error_norm, initial_step, rk_step
 
 # statuses
 DONE, OUT_FULL, IMPACTS_FULL, MAX_STEPS, STEP_UNDERFLOW, NOT_FINITE = range(6)
+
+
+class Buffers(NamedTuple):
+    """What the loop works in, allocated once per solver rather than on every call (a face calls it every
+    millisecond): the stages' temporaries, the step's samples and the evaluation stages' workspace. Every
+    entry is written before it is read, within one step."""
+
+    tmp: np.ndarray      # (ny,) each
+    acc: np.ndarray
+    ynew: np.ndarray
+    err: np.ndarray
+    scale: np.ndarray
+    work: np.ndarray
+    fbuf: np.ndarray     # (N_SAMPLES + 1, P) force of each near pair at each sample
+    pwbuf: np.ndarray    # (N_SAMPLES + 1, P) its dissipation power
+    cls: np.ndarray      # (N_SAMPLES + 1, P) its mode class (smooth pairs)
+    values: np.ndarray   # (N_SAMPLES + 1, 2P) its event functions
+    W: Workspace
+    samples: np.ndarray  # (N_SAMPLES + 1, N) KINEMATICS: the berries at the step's samples
+
+
+@jit
+def buffers(M, ny):
+    p = max(M.pair.shape[0], 1)
+    return Buffers(np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny),
+                   np.zeros((N_SAMPLES + 1, p)), np.zeros((N_SAMPLES + 1, p)),
+                   np.zeros((N_SAMPLES + 1, p), dtype=np.int64), np.zeros((N_SAMPLES + 1, 2 * p)), workspace(M),
+                   samples_for(M))
 
 
 @jit
@@ -50,8 +79,9 @@ def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
 
 
 @jit
-def integrate(M, X, TB, S, config, R, t_target, max_steps):
-    """Advance S to t_target (or until the recorder fills or max_steps). Returns a status code."""
+def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
+    """Advance S to t_target (or until the recorder fills or max_steps), working in Z (Buffers). Returns a
+    status code."""
     cfg = config[0]
     P = S.physical
     C = P.contacts
@@ -66,13 +96,9 @@ def integrate(M, X, TB, S, config, R, t_target, max_steps):
     ns = TB.b.shape[0]
     err_exp = -1.0 / (TB.error_order + 1.0)
     fixed = cfg.fixed_step > 0.0
-    W = workspace(M)
-    samples = samples_for(M)
-    tmp, acc, ynew, err, scale, work = np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny)
-    fbuf = np.zeros((N_SAMPLES + 1, max(npair, 1)))
-    pwbuf = np.zeros((N_SAMPLES + 1, max(npair, 1)))
-    cls = np.zeros((N_SAMPLES + 1, max(npair, 1)), dtype=np.int64)
-    values = np.zeros((N_SAMPLES + 1, 2 * max(npair, 1)))
+    W, samples = Z.W, Z.samples
+    tmp, acc, ynew, err, scale, work = Z.tmp, Z.acc, Z.ynew, Z.err, Z.scale, Z.work
+    fbuf, pwbuf, cls, values = Z.fbuf, Z.pwbuf, Z.cls, Z.values
     nbreak = 0 if inp.held else X.breaks.shape[0]  # a held input has no breakpoints
     steps = 0
     while P.t[0] < t_target:

@@ -35,30 +35,31 @@ class Session(structref.StructRefProxy):
 structref.define_boxing(SessionType, Session)
 
 
-def _new(model, excitation, tableau, config, state, scratch, memory, backup, now):
+def _new(model, excitation, tableau, config, state, scratch, buffers, memory, backup, now):
     raise NotImplementedError  # compiled only (the overload below)
 
 
 @overload(_new)
-def _new_impl(model, excitation, tableau, config, state, scratch, memory, backup, now):
+def _new_impl(model, excitation, tableau, config, state, scratch, buffers, memory, backup, now):
     kind = SessionType([("model", model), ("excitation", excitation), ("tableau", tableau), ("config", config),
-                        ("state", state), ("scratch", scratch), ("memory", memory), ("backup", backup),
-                        ("now", now)])
+                        ("state", state), ("scratch", scratch), ("buffers", buffers), ("memory", memory),
+                        ("backup", backup), ("now", now)])
 
-    def impl(model, excitation, tableau, config, state, scratch, memory, backup, now):
+    def impl(model, excitation, tableau, config, state, scratch, buffers, memory, backup, now):
         s = structref.new(kind)
         s.model, s.excitation, s.tableau, s.config = model, excitation, tableau, config
-        s.state, s.scratch, s.memory, s.backup, s.now = state, scratch, memory, backup, now
+        s.state, s.scratch, s.buffers, s.memory, s.backup, s.now = state, scratch, buffers, memory, backup, now
         return s
 
     return impl
 
 
 @jit
-def new(model, excitation, tableau, config, state, scratch, memory, backup, now):
-    """A Session over these arrays (shared, not copied: the Solver keeps its numpy views of them). `now` is
-    (Observation, accel (1, 2), in_contact (1, P)) of one sample: what `refresh` fills."""
-    return _new(model, excitation, tableau, config, state, scratch, memory, backup, now)
+def new(model, excitation, tableau, config, state, scratch, buffers, memory, backup, now):
+    """A Session over these arrays (shared, not copied: the Solver keeps its numpy views of them). `buffers`
+    is the loop's loop.Buffers; `now` is (Observation, accel (1, 2), in_contact (1, P)) of one sample: what
+    `refresh` fills."""
+    return _new(model, excitation, tableau, config, state, scratch, buffers, memory, backup, now)
 
 
 @jit
@@ -80,7 +81,7 @@ def advance(s, dt, held, ax, az, max_steps):
         inp.held, inp.ax, inp.az = held, ax, az
         derivative(S, s.model, s.excitation)
     t_target = S.physical.t[0] + dt
-    status = integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, t_target, max_steps)
+    status = integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, s.buffers, t_target, max_steps)
     return status, t_target, s.scratch.cursor[0].n_impacts
 
 
@@ -100,6 +101,8 @@ def refresh(s):
 
 @jit
 def resume(s, t_target, max_steps):
-    """Go on towards t_target after the caller emptied a full impact list. Returns what advance returns."""
-    status = integrate(s.model, s.excitation, s.tableau, s.state, s.config, s.scratch, t_target, max_steps)
+    """Go on towards t_target (after the caller emptied a full impact list; or one step of Solver.step, with
+    max_steps = 1). Returns what advance returns."""
+    status = integrate(s.model, s.excitation, s.tableau, s.state, s.config, s.scratch, s.buffers, t_target,
+                       max_steps)
     return status, t_target, s.scratch.cursor[0].n_impacts

@@ -30,7 +30,7 @@ from . import session as ses
 from . import state as st
 from .broadphase import rebuild
 from .events import classify, open_impact
-from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, STEP_UNDERFLOW, integrate
+from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, STEP_UNDERFLOW, buffers, integrate
 from .tableau import BOGACKI_SHAMPINE, DOPRI5
 
 #: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
@@ -102,8 +102,9 @@ class Solver:
         self._scratch = st.recorder(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
         m, lay, y = self.model, self.layout, self.state.physical.y
         now = (obs.empty(1, m.n_berries, m.n_dof, len(m.pairs)), np.zeros((1, 2)), np.zeros((1, len(m.pairs)), bool))
+        self._buffers = buffers(self.M, self.layout.size)
         self._session = ses.new(self.M, self.excitation, self.tableau, self.config, self.state, self._scratch,
-                                self._memory, self._backup, now)
+                                self._buffers, self._memory, self._backup, now)
         observation, accel, in_contact = now
         self._snapshot = catalogue.Snapshot(self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel,
                                             y[None, lay.base], np.zeros((1, len(LEDGER_TERMS))),
@@ -222,7 +223,8 @@ class Solver:
 
     # --- stepping --------------------------------------------------------------------------------
     def _integrate(self, t_target: float, recorder: st.Recorder, max_steps: int) -> int:
-        return integrate(self.M, self.excitation, self.tableau, self.state, self.config, recorder, t_target, max_steps)
+        return integrate(self.M, self.excitation, self.tableau, self.state, self.config, recorder, self._buffers,
+                         t_target, max_steps)
 
     def _closed_into(self, rec: st.Recorder) -> None:
         """Move the impacts that ended out of the recorder."""
@@ -234,7 +236,7 @@ class Solver:
     def step(self) -> float:
         """Take one accepted step (it may end early at a contact switch or breakpoint); return the new time."""
         self._save()
-        status = self._integrate(math.inf, self._scratch, 1)
+        status = ses.resume(self._session, math.inf, 1)[0]
         if status not in (DONE, MAX_STEPS):
             self._fail(status)
         self._closed_into(self._scratch)
