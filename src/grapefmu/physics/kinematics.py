@@ -78,12 +78,18 @@ def berry_kinematics(b, k, s, sd, t, td, bx, bz, vbx, vbz):
 
 
 @inline
+def rachis_motion(y, M):
+    """(b_x, b_z, ḃ_x, ḃ_z): the rachis displacement and velocity the state y holds (physics/layout.py)."""
+    o_bv, o_b = model_offsets(M)[:2]
+    return y[o_b], y[o_b + 1], y[o_bv], y[o_bv + 1]
+
+
+@inline
 def kinematics(y, M, kin):
     """Stage 1 for every berry into kin ((N,) KINEMATICS)."""
     berry = M.berry
     nd = M.n_dof
-    o_bv, o_b = model_offsets(M)[:2]
-    vbx, vbz, bx, bz = y[o_bv], y[o_bv + 1], y[o_b], y[o_b + 1]
+    bx, bz, vbx, vbz = rachis_motion(y, M)
     for i in range(berry.shape[0]):
         o = berry[i].dof  # a planar berry ignores t: y[o + 1] is then the next angle (y runs on past q̇)
         berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1], bx, bz, vbx, vbz)
@@ -175,8 +181,7 @@ def pair_state(y, M, pr, kin):
     """Stage 1 for one pair alone (the event search's root finding needs no other berry), then its gap."""
     berry = M.berry
     nd = M.n_dof
-    o_bv, o_b = model_offsets(M)[:2]
-    vbx, vbz, bx, bz = y[o_bv], y[o_bv + 1], y[o_b], y[o_b + 1]
+    bx, bz, vbx, vbz = rachis_motion(y, M)
     for i in (pr.i, pr.j):
         if i < berry.shape[0]:
             o = berry[i].dof
