@@ -161,7 +161,8 @@ class FmuCore:
         if not ok:
             return f"{name} = {value!r}: expected a finite {kind.__name__}; value refused"
         if name in INPUT_BOUNDS and abs(value) > INPUT_BOUNDS[name]:
-            return f"input {name} = {value!r}: expected an acceleration within ±{MAX_ACCEL:g} m/s²; value refused"
+            return (f"input {name} = {value!r}: expected an acceleration within ±{INPUT_BOUNDS[name]:g} m/s²; "
+                    "value refused")
         return None
 
     def step(self, t: float, dt: float) -> tuple[int, str] | None:
