@@ -53,8 +53,8 @@ def test_the_rachis_follows_a_sampled_motion_to_the_splines_error(tmp_path, orie
     run = simulate(scene(table_scene(path)))
     x, z = minimum_jerk(run.t)
     assert np.abs(run.base_displacement[:, 0] - x).max() < 2e-6  # m: the cubic spline's O(h⁴) error
-    assert np.abs(run.base_displacement[:, 1] - z).max() < 2e-6
-    assert np.abs(run.base_displacement[-1] - [DX, DZ]).max() < 1e-9  # at rest where the table ends
+    assert np.abs(run.base_displacement[:, 2] - z).max() < 2e-6
+    assert np.abs(run.base_displacement[-1] - [DX, 0.0, DZ]).max() < 1e-9  # at rest where the table ends
     assert run.collision_count > 0
 
 

@@ -62,11 +62,12 @@ def rhs_seconds(run, repeats: int = 7, min_wall: float = 0.02) -> float:
 
 @jit
 def compiled_steps(s, dt, n, hold, ax, az):
-    """The communication points of n calls of advance(dt) (held input (ax, az) if hold, else the scene's
+    """The communication points of n calls of advance(dt) (held input (ax, 0, az) if hold, else the scene's
     excitation), without leaving compiled code: the same solver steps, none of the call's costs."""
     S = s.state
     inp = S.input[0]
     inp.held, inp.ax, inp.az = hold, ax, az
+    inp.ay, inp.alpha_x, inp.alpha_y, inp.alpha_z = 0.0, 0.0, 0.0, 0.0
     for _ in range(n):
         if integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, s.buffers, S.physical.t[0] + dt,
                      10_000_000) != DONE:

@@ -43,7 +43,7 @@ def camera_data(scene: Scene, *, rate: float = RATE_HZ, noise: float = NOISE_RAD
     for a in chosen:
         cols[angle_column(a)] = run.angles[:, names.index(a)] + rng.normal(0.0, noise, len(run.t))
     if gripper:
-        for k, c in enumerate(accel_columns()):
+        for c, k in zip(accel_columns(), (0, 2)):  # (a_x, a_z) of ACCEL_COMPONENTS: the fit is planar
             cols[c] = run.accel[:, k]
     return cols
 

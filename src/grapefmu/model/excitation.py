@@ -1,4 +1,5 @@
-"""Base excitation: the acceleration a(t) = (a_x, a_z) of the rachis held by the gripper.
+"""Base excitation: the motion of the rachis held by the gripper, as its acceleration (a(t), α(t)) in the world
+frame (physics/excitation.ACCEL_COMPONENTS) from an initial orientation and angular velocity.
 
 Every kind compiles to one of three numeric forms that physics/excitation.py evaluates:
 a constant, a windowed chirp
@@ -22,7 +23,8 @@ CONSTANT, CHIRP, TABLE = 0, 1, 2
 
 
 class ExcitationArrays(NamedTuple):
-    """What the compiled core reads: kind code, parameters, table rows (t, a_x, a_z), breakpoints."""
+    """What the compiled core reads: kind code, parameters, table rows (t, a_x, a_y, a_z, α_x, α_y, α_z),
+    breakpoints."""
 
     kind: int
     par: np.ndarray
@@ -34,13 +36,37 @@ class ExcitationArrays(NamedTuple):
 class Excitation:
     """A validated excitation. `kind` is the scene's name for it; `arrays` is its compiled form. `defined_until`:
     the time after which the scene does not say what the gripper does (a CSV's last row, without `after`);
-    a run past it is refused (check_covers)."""
+    a run past it is refused (check_covers). `orientation` (the quaternion (x, y, z, w) of R, world from rachis)
+    and `angular_velocity` (ω, world, rad/s) are the rachis' at the start; it starts at the world origin at rest
+    in translation."""
 
     kind: str
     arrays: ExcitationArrays
     description: str = ""
     defined_until: float = math.inf
     key: str = "excitation"   # the scene key to name when a run goes past defined_until
+    orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+    angular_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def turns(self) -> bool:
+        """Whether the rachis ever rotates (an angular velocity at the start or an angular acceleration)."""
+        a = self.arrays
+        rows = a.table[:, 4:7] if a.kind == TABLE else a.par[3:6]
+        return bool(np.any(rows != 0.0) or any(w != 0.0 for w in self.angular_velocity))
+
+    def starting(self, orientation=None, angular_velocity=None) -> "Excitation":
+        """This excitation from another initial orientation (quaternion x, y, z, w) or angular velocity."""
+        from dataclasses import replace
+        return replace(self, orientation=tuple(map(float, orientation if orientation is not None else self.orientation)),
+                       angular_velocity=tuple(map(float, angular_velocity if angular_velocity is not None
+                                                  else self.angular_velocity)))
+
+
+def quaternion_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """The quaternion (x, y, z, w) of fixed-axis roll, pitch, yaw (REP-103: R = R_z(yaw) R_y(pitch) R_x(roll))."""
+    from scipy.spatial.transform import Rotation
+    return tuple(float(c) for c in Rotation.from_euler("xyz", [roll, pitch, yaw]).as_quat())
 
 
 #: what a CSV excitation does after its last row (the scene's `after`): keep the last row's acceleration, or zero
@@ -57,31 +83,48 @@ def check_covers(ex: Excitation, t_end: float, t_key: str) -> None:
                                  f"acceleration) or after = \"zero\" in [excitation], or extend the file")
 
 
-def constant(ax: float = 0.0, az: float = 0.0) -> Excitation:
-    par = np.zeros(6)
-    par[0], par[1] = ax, az
-    return Excitation("none" if ax == az == 0.0 else "constant",
-                      ExcitationArrays(CONSTANT, par, np.zeros((1, 3)), np.zeros(0)))
+def vector3(v) -> tuple[float, float, float]:
+    """A linear acceleration as (x, y, z): a 2-vector is the planar (x, z)."""
+    v = tuple(float(c) for c in v)
+    return (v[0], 0.0, v[1]) if len(v) == 2 else v
 
 
-def chirp(kind: str, amplitude: tuple[float, float], f_start: float, f_stop: float,
-          start: float, duration: float) -> Excitation:
-    par = np.array([amplitude[0], amplitude[1], f_start, f_stop, start, duration])
+_NO_TABLE = np.zeros((1, 7))
+
+
+def constant(accel=(0.0, 0.0, 0.0), angular_accel=(0.0, 0.0, 0.0)) -> Excitation:
+    """The rachis accelerating at a constant a (m/s², a 2-vector is (x, z)) and α (rad/s²), world frame."""
+    par = np.array([*vector3(accel), *angular_accel], dtype=float)
+    return Excitation("none" if not par.any() else "constant",
+                      ExcitationArrays(CONSTANT, par, _NO_TABLE, np.zeros(0)))
+
+
+def chirp(kind: str, amplitude, f_start: float, f_stop: float, start: float, duration: float,
+          angular_amplitude=(0.0, 0.0, 0.0)) -> Excitation:
+    """(a, α) = (amplitude, angular_amplitude) sin(2π(f₀τ + ½(f₁ − f₀)τ²/T)) for τ = t − start in [0, T)."""
+    amp = (*vector3(amplitude), *(float(c) for c in angular_amplitude))
+    par = np.array([*amp, f_start, f_stop, start, duration])
     breaks = np.array([start, start + duration])
-    desc = f"{kind}: amplitude {amplitude} m/s², {f_start:g}→{f_stop:g} Hz from {start:g} s for {duration:g} s"
-    return Excitation(kind, ExcitationArrays(CHIRP, par, np.zeros((1, 3)), breaks), desc)
+    turn = f", angular {tuple(amp[3:])} rad/s²" if any(amp[3:]) else ""
+    desc = f"{kind}: amplitude {tuple(amp[:3])} m/s²{turn}, {f_start:g}→{f_stop:g} Hz from {start:g} s for {duration:g} s"
+    return Excitation(kind, ExcitationArrays(CHIRP, par, _NO_TABLE, breaks), desc)
 
 
-def impulse(peak: tuple[float, float], start: float, duration: float) -> Excitation:
+def impulse(peak, start: float, duration: float, angular_peak=(0.0, 0.0, 0.0)) -> Excitation:
     """A half-sine acceleration pulse: a chirp at 1/(2·duration) Hz over half a period."""
     f = 0.5 / duration
-    ex = chirp("impulse", peak, f, f, start, duration)
-    return Excitation("impulse", ex.arrays, f"impulse: half-sine {peak} m/s² peak, {duration:g} s at {start:g} s")
+    ex = chirp("impulse", peak, f, f, start, duration, angular_peak)
+    return Excitation("impulse", ex.arrays, f"impulse: half-sine {tuple(vector3(peak))} m/s² peak, {duration:g} s at "
+                                            f"{start:g} s")
 
 
 def table(kind: str, rows: np.ndarray, description: str = "") -> Excitation:
-    rows = np.ascontiguousarray(rows, dtype=float)
-    return Excitation(kind, ExcitationArrays(TABLE, np.zeros(6), rows, rows[:, 0].copy()), description)
+    """A piecewise-linear table of rows (t, a_x, a_y, a_z, α_x, α_y, α_z); rows (t, a_x, a_z) are planar."""
+    rows = np.asarray(rows, dtype=float)
+    if rows.shape[1] == 3:
+        rows = np.column_stack([rows[:, 0], rows[:, 1], np.zeros(len(rows)), rows[:, 2], np.zeros((len(rows), 3))])
+    rows = np.ascontiguousarray(rows)
+    return Excitation(kind, ExcitationArrays(TABLE, np.zeros(10), rows, rows[:, 0].copy()), description)
 
 
 def _unit_move_profile(jerk_fraction: float) -> tuple[np.ndarray, np.ndarray]:
@@ -93,12 +136,12 @@ def _unit_move_profile(jerk_fraction: float) -> tuple[np.ndarray, np.ndarray]:
     return u, a
 
 
-def integrate_table(rows: np.ndarray, v0: tuple[float, float] = (0.0, 0.0)) -> tuple[np.ndarray, np.ndarray]:
-    """Exact velocity and displacement at the knots of a piecewise-linear acceleration table."""
-    t, a = rows[:, 0], rows[:, 1:3]
+def integrate_table(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exact velocity and displacement at the knots of a piecewise-linear acceleration table, from rest, for each
+    column after the time."""
+    t, a = rows[:, 0], rows[:, 1:]
     v = np.zeros_like(a)
     x = np.zeros_like(a)
-    v[0] = v0
     for k in range(1, len(t)):
         h = t[k] - t[k - 1]
         v[k] = v[k - 1] + 0.5 * h * (a[k - 1] + a[k])
@@ -132,7 +175,8 @@ def pick_and_place(moves: list[tuple[tuple[float, float], float]], start: float 
 
 
 def read_csv(path: Path, key: str, hold: bool = False, after: str | None = None) -> Excitation:
-    """A CSV of time, ax, az (header row allowed); linear in between (or held from each row to the
+    """A CSV of time, ax, az, or of time, ax, ay, az, alpha_x, alpha_y, alpha_z (m/s², rad/s², world frame; a
+    header row allowed); linear in between (or held from each row to the
     next with hold = true, as a sampled controller output is), zero before the first row. After the last
     row: its acceleration kept (after = "hold"), zero (after = "zero"), or, without `after`, undefined: a run
     that goes past it is refused (check_covers)."""
@@ -142,9 +186,11 @@ def read_csv(path: Path, key: str, hold: bool = False, after: str | None = None)
     if len(raw) < 2:
         raise SceneError(key, f"{path}: need at least two rows of time, ax, az")
     rows = []
+    width = len(raw[0])
     for n, r in enumerate(raw, start=1):
-        if len(r) != 3 or not all(_is_number(c) for c in r):
-            raise SceneError(key, f"{path} row {n}: expected three numbers time, ax, az, got {r!r}")
+        if len(r) != width or width not in (3, 7) or not all(_is_number(c) for c in r):
+            raise SceneError(key, f"{path} row {n}: expected three numbers time, ax, az or seven time, ax, ay, az, "
+                                  f"alpha_x, alpha_y, alpha_z (as in row 1), got {r!r}")
         vals = [float(c) for c in r]
         if not all(math.isfinite(v) for v in vals):
             raise SceneError(key, f"{path} row {n}: values must be finite, got {r!r}")
@@ -246,7 +292,7 @@ def zero_order_hold(rows: np.ndarray) -> np.ndarray:
     """A staircase as a piecewise-linear table: each value repeated at the next row's time.
     The solver picks the piece from the step's start, so the duplicated knot is never ambiguous."""
     t, a = rows[:, 0], rows[:, 1:]
-    out = np.empty((2 * len(rows) - 1, 3))
+    out = np.empty((2 * len(rows) - 1, rows.shape[1]))
     out[0::2, 0] = t
     out[0::2, 1:] = a
     out[1::2, 0] = t[1:]

@@ -13,7 +13,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .contact import ContactLaw
-from .excitation import Excitation, constant
+from ..errors import SceneError
+from .excitation import TABLE, Excitation, constant
 
 
 @dataclass(frozen=True)
@@ -161,6 +162,26 @@ class Model:
     def planar(self) -> bool:
         return not any(b.spherical for b in self.berries)
 
+    def refuses_turn(self, excitation) -> tuple[str, str] | None:
+        """(scene key, why) this model cannot follow the excitation's rotation, or None. A planar berry swings in
+        the rachis' x–z plane, so the rachis may turn only about its y axis (an orientation about y, ω and α
+        along y)."""
+        if all(b.spherical for b in self.berries):
+            return None
+        a = excitation.arrays
+        alpha = a.table[:, [4, 6]] if a.kind == TABLE else a.par[[3, 5]]
+        q = excitation.orientation
+        w = excitation.angular_velocity
+        alpha_key = {"constant": "angular_accel", "impulse": "angular_peak", "sine": "angular_amplitude",
+                     "sweep": "angular_amplitude"}.get(excitation.kind, "file")
+        for key, what, bad in (("orientation", "the initial orientation", q[0] != 0.0 or q[2] != 0.0),
+                               ("angular_velocity", "the initial angular velocity", w[0] != 0.0 or w[2] != 0.0),
+                               (alpha_key, "the angular acceleration", bool(np.any(alpha != 0.0)))):
+            if bad:
+                return (f"excitation.{key}", f"{what} turns the rachis about x or z; planar berries swing in the "
+                        "rachis' x–z plane and follow rotation about y only (use spherical berries for any rotation)")
+        return None
+
     @property
     def body_names(self) -> list[str]:
         """Every body a contact pair can name: the berries, then the obstacles (ContactPair.j indexes this)."""
@@ -248,6 +269,11 @@ class Scene:
     thresholds: Thresholds = field(default_factory=Thresholds)
     source: str = ""          # the TOML text it was read from, kept for reproducible recordings
     name: str = "scene"
+
+    def __post_init__(self):
+        why = self.model.refuses_turn(self.excitation)
+        if why:
+            raise SceneError(*why)
 
     @property
     def initial_state(self) -> np.ndarray:

@@ -1,8 +1,9 @@
 """Stage 3, accelerations, and the whole right-hand side (docs/model.md §4).
 
 rhs runs the stages in order, each computing its quantities once (like MuJoCo's mj_forward):
-the rachis' acceleration → kinematics → forces → generalized forces → accelerations, plus the rates of
-the energy integrals that ride along in y (physics/layout.py).
+the rachis' acceleration → kinematics → forces → generalized forces → accelerations, plus the rachis' own
+motion (ḃ, b, ω and its orientation) and the rates of the energy integrals that ride along in y
+(physics/layout.py).
 """
 from __future__ import annotations
 
@@ -31,10 +32,10 @@ def rhs(t, t_ref, y, dy, contacts, M, X, inp, W, pairs, n_pairs):
     nd = M.n_dof
     nc = M.coupling.shape[0]
     npair = M.pair.shape[0]
-    ax, az = applied_accel(X, inp, t, t_ref)
-    kinematics(y, M, kin)
-    diss, work = forces(ax, az, contacts, M, W, pairs, n_pairs)
-    o_bv, o_b, o_dh, o_dc, o_contact, o_w, size = model_offsets(M)
+    acc = applied_accel(X, inp, t, t_ref)
+    fr = kinematics(y, M, kin)
+    diss, work = forces(acc, fr, contacts, M, W, pairs, n_pairs)
+    o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_w, size = model_offsets(M)
     for i in range(n):
         b, k = berry[i], kin[i]
         o = b.dof
@@ -46,7 +47,6 @@ def rhs(t, t_ref, y, dy, contacts, M, X, inp, W, pairs, n_pairs):
             torque[o + a] = hinge_torque(b, a, y[o + a], qd) + (q_s if a == 0 else q_t)
             rate2 += qd * qd
         dy[o_dh + i] = b.hinge_damping * rate2
-        work -= b.mass * b.twig_length * (ax * k.dux + az * k.duz)  # the inertial field's power −m a·ṗ
     for i in range(n):  # accelerations: the diagonal mass matrix m l² (1, cos² s) and the velocity terms
         b = berry[i]
         o = b.dof
@@ -68,10 +68,16 @@ def rhs(t, t_ref, y, dy, contacts, M, X, inp, W, pairs, n_pairs):
             dy[o_pair + npair + pairs[kk]] = W.pair[kk].power
     dy[o_contact] = diss
     dy[o_w] = work
-    dy[o_bv] = ax
-    dy[o_bv + 1] = az
-    dy[o_b] = y[o_bv]
-    dy[o_b + 1] = y[o_bv + 1]
+    for a in range(3):
+        dy[o_bv + a] = acc[a]
+        dy[o_b + a] = y[o_bv + a]
+        dy[o_om + a] = acc[3 + a]
+    wx, wy, wz = y[o_om], y[o_om + 1], y[o_om + 2]  # q̇ = ½ (ω, 0) ⊗ q, ω in the world frame
+    qx, qy, qz, qw = y[o_rot], y[o_rot + 1], y[o_rot + 2], y[o_rot + 3]
+    dy[o_rot] = 0.5 * (wx * qw + wy * qz - wz * qy)
+    dy[o_rot + 1] = 0.5 * (wy * qw + wz * qx - wx * qz)
+    dy[o_rot + 2] = 0.5 * (wz * qw + wx * qy - wy * qx)
+    dy[o_rot + 3] = -0.5 * (wx * qx + wy * qy + wz * qz)
 
 
 #: the right-hand side inlined into the Runge–Kutta stage loop only: a compiled call passing a dozen
@@ -81,10 +87,10 @@ rhs_inline = nb.njit(cache=True, error_model="numpy", inline="always")(rhs.py_fu
 __all__ = ["rhs", "rhs_inline"]
 
 
-def derivative(M, y, contacts, accel=(0.0, 0.0), t: float = 0.0):
+def derivative(M, y, contacts, accel=(0.0,) * 6, t: float = 0.0):
     """dy/dt at one state for callers outside the compiled core (tests, checks): every pair evaluated,
-    contacts a (P,) forces.CONTACT array, the rachis acceleration accel = (a_x, a_z) held."""
+    contacts a (P,) forces.CONTACT array, the rachis acceleration accel (ACCEL_COMPONENTS, world frame) held."""
     dy = np.zeros_like(y)
-    rhs(t, t, y, dy, contacts, M, constant().arrays, held(*accel)[0], workspace(M), np.arange(M.pair.shape[0]),
+    rhs(t, t, y, dy, contacts, M, constant().arrays, held(accel)[0], workspace(M), np.arange(M.pair.shape[0]),
         M.pair.shape[0])
     return dy

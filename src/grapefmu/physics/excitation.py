@@ -1,4 +1,5 @@
-"""The base acceleration a(t) = (a_x, a_z) of the rachis: the one evaluator of every excitation.
+"""The rachis' acceleration (a(t), α(t)): the linear acceleration of its origin and its angular acceleration,
+both in the world frame (m/s², rad/s²), the one evaluator of every excitation.
 
 The solver asks for a(t) on the smooth piece that contains t_ref (its step's start), so that a step
 ending exactly on a breakpoint still sees the acceleration of the piece it integrated; everything else
@@ -14,24 +15,27 @@ import numpy as np
 from ..model.excitation import CHIRP, CONSTANT, Excitation
 from .compiled import inline, jit
 
-#: the held input: while `held`, (ax, az) replaces the scene's excitation
-INPUT = np.dtype([("held", np.bool_), ("ax", np.float64), ("az", np.float64)])
+#: the components of the rachis acceleration, in the order every face and array (..., 6) holds them
+ACCEL_COMPONENTS = ("ax", "ay", "az", "alpha_x", "alpha_y", "alpha_z")
+#: the held input: while `held`, (a, α) replaces the scene's excitation
+INPUT = np.dtype([("held", np.bool_), *((c, np.float64) for c in ACCEL_COMPONENTS)])
 
 
 @inline
 def base_accel(X, t, t_ref):
-    """a(t) of the scene's excitation X (model.excitation.ExcitationArrays), m/s². No array is bound on the
-    constant and chirp paths: an array bound inside an inlined function costs two reference counts."""
+    """(a_x, a_y, a_z, α_x, α_y, α_z)(t) of the scene's excitation X (model.excitation.ExcitationArrays). No array
+    is bound on the constant and chirp paths: an array bound inside an inlined function costs two reference
+    counts."""
     if X.kind == CONSTANT:
-        return X.par[0], X.par[1]
+        return X.par[0], X.par[1], X.par[2], X.par[3], X.par[4], X.par[5]
     if X.kind == CHIRP:
-        start = X.par[4]
-        dur = X.par[5]
+        start = X.par[8]
+        dur = X.par[9]
         if t_ref < start or t_ref >= start + dur:
-            return 0.0, 0.0
+            return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
         tau = t - start
-        s = math.sin(2.0 * math.pi * (X.par[2] * tau + 0.5 * (X.par[3] - X.par[2]) * tau * tau / dur))
-        return X.par[0] * s, X.par[1] * s
+        s = math.sin(2.0 * math.pi * (X.par[6] * tau + 0.5 * (X.par[7] - X.par[6]) * tau * tau / dur))
+        return X.par[0] * s, X.par[1] * s, X.par[2] * s, X.par[3] * s, X.par[4] * s, X.par[5] * s
     return table_accel(X.table, t, t_ref)
 
 
@@ -40,7 +44,7 @@ def table_accel(tab, t, t_ref):
     """Linear in the row that holds t_ref (the last row with time ≤ t_ref), zero outside the table."""
     n = tab.shape[0]
     if t_ref < tab[0, 0] or t_ref >= tab[n - 1, 0]:
-        return 0.0, 0.0
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     lo, hi = 0, n - 1  # tab[lo, 0] <= t_ref < tab[hi, 0]
     while hi - lo > 1:
         mid = (lo + hi) // 2
@@ -51,7 +55,9 @@ def table_accel(tab, t, t_ref):
     k = lo
     span = tab[k + 1, 0] - tab[k, 0]
     u = (t - tab[k, 0]) / span if span > 0.0 else 0.0
-    return tab[k, 1] + u * (tab[k + 1, 1] - tab[k, 1]), tab[k, 2] + u * (tab[k + 1, 2] - tab[k, 2])
+    v = 1.0 - u
+    return (v * tab[k, 1] + u * tab[k + 1, 1], v * tab[k, 2] + u * tab[k + 1, 2], v * tab[k, 3] + u * tab[k + 1, 3],
+            v * tab[k, 4] + u * tab[k + 1, 4], v * tab[k, 5] + u * tab[k + 1, 5], v * tab[k, 6] + u * tab[k + 1, 6])
 
 
 @inline
@@ -59,27 +65,29 @@ def applied_accel(X, inp, t, t_ref):
     """What the rachis does: the held input (inp, an INPUT record) while there is one, else the scene's
     excitation. A record, not its array: an array handed to an inlined function costs reference counts."""
     if inp.held:
-        return inp.ax, inp.az
+        return inp.ax, inp.ay, inp.az, inp.alpha_x, inp.alpha_y, inp.alpha_z
     return base_accel(X, t, t_ref)
 
 
 @jit
 def _series(X, t, out):
     for k in range(t.shape[0]):
-        out[k, 0], out[k, 1] = base_accel(X, t[k], t[k])
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3], out[k, 4], out[k, 5] = base_accel(X, t[k], t[k])
 
 
 def accel(excitation: Excitation, t) -> np.ndarray:
-    """a(t) as an array (..., 2) of (a_x, a_z), m/s², for plots, controllers and checks."""
+    """(a, α)(t) as an array (..., 6) of ACCEL_COMPONENTS (m/s², rad/s², world frame), for plots, controllers and
+    checks."""
     t = np.asarray(t, dtype=float)
     flat = np.ascontiguousarray(t.reshape(-1))
-    out = np.empty((flat.size, 2))
+    out = np.empty((flat.size, 6))
     _series(excitation.arrays, flat, out)
-    return out.reshape(t.shape + (2,))
+    return out.reshape(t.shape + (6,))
 
 
-def held(ax: float = 0.0, az: float = 0.0, on: bool = True) -> np.ndarray:
-    """An input record: (ax, az) held, or (on = False) the scene's excitation."""
+def held(accel=(0.0,) * 6, on: bool = True) -> np.ndarray:
+    """An input record: the rachis acceleration `accel` (ACCEL_COMPONENTS) held, or (on = False) the scene's
+    excitation."""
     rec = np.zeros(1, dtype=INPUT)
-    rec[0] = (on, ax, az)
+    rec[0] = (on, *accel)
     return rec

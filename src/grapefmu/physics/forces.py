@@ -1,5 +1,5 @@
 """Stage 2, forces (docs/model.md §2–3): every force on a berry as one Cartesian vector F_i in the
-rachis frame (gravity and the rachis' inertial field, the k3/c3 coupling, contact), mapped to the
+rachis frame (gravity and the moving frame's fields, the k3/c3 coupling, contact), mapped to the
 angles through the one generalized-force map Q = l Jᵀ R_z(−ψ) F; the hinge acts on the angles directly.
 
 A contact pair carries a *mode* (§3): 0 apart, 1 loaded, 2 overlapping but unloaded. Inside a step
@@ -14,7 +14,7 @@ import numpy as np
 
 from ..model.contact import Law
 from .compiled import inline
-from .kinematics import contact_gap
+from .kinematics import contact_gap, fixed_in_world, to_rachis
 
 #: the discrete contact state of a pair (part of the physical state)
 CONTACT = np.dtype([("mode", "i8"),      # 0 apart, 1 loaded, 2 overlapping but unloaded
@@ -97,20 +97,41 @@ def coupling(cp, bi, bj, ki, kj):
 
 
 @inline
-def forces(ax, az, contacts, M, W, pairs, n_pairs):
-    """Stage 2: F_i of every berry into W.berry[i] (fx, fy, fz; needs stage 1 there). Contact is evaluated for
-    the first n_pairs entries of `pairs` (every pair that can push must be among them); the k-th one's
-    force and dissipation power go to W.pair[k], each coupling's c3 ṡ² to W.coupling_power.
-    Returns the total contact dissipation power and the power of the obstacles on the berries as the rachis
-    moves past them (§7: F n·ḃ per berry–obstacle contact, the ledger's share of the base's work)."""
+def forces(acc, fr, contacts, M, W, pairs, n_pairs):
+    """Stage 2: F_i of every berry into W.berry[i] (fx, fy, fz; needs stage 1 there and its Frame fr) under the
+    rachis acceleration acc (a, α: ACCEL_COMPONENTS, world frame). Contact is evaluated for the first n_pairs
+    entries of `pairs` (every pair that can push must be among them); the k-th one's force and dissipation
+    power go to W.pair[k], each coupling's c3 ṡ² to W.coupling_power.
+    Returns the total contact dissipation power and the base's power (§5): the frame's fields on the berries'
+    motion relative to the rachis, and the obstacles fixed in the world on the berries as the rachis carries
+    them past (§7: F n·(ḃ + ω × p) per berry–obstacle contact)."""
     g = M.gravity
     berry, kin = M.berry, W.berry
+    ax, ay, az = to_rachis(fr, acc[0], acc[1], acc[2])
+    gx, gy, gz = to_rachis(fr, 0.0, 0.0, -g)
+    ex, ey, ez = gx - ax, gy - ay, gz + g - az  # the uniform field g⃗ − a, less the rachis-frame gravity (0, 0, −g)
+    alx, aly, alz = to_rachis(fr, acc[3], acc[4], acc[5])
+    ox, oy, oz = fr.ox, fr.oy, fr.oz
+    spinning = ox != 0.0 or oy != 0.0 or oz != 0.0 or alx != 0.0 or aly != 0.0 or alz != 0.0
+    work = 0.0
     for i in range(berry.shape[0]):
         m = berry[i].mass
         k = kin[i]
-        k.fx = -m * ax  # gravity and the rachis' inertial field m (g⃗ − a)
-        k.fy = 0.0
-        k.fz = -m * (g + az)
+        fx, fy, fz = ex, ey, ez
+        if spinning:  # Euler −α × p, centrifugal −ω × (ω × p); Coriolis −2 ω × ṗ below (it does no work)
+            px, py, pz = k.px, k.py, k.pz
+            cx, cy, cz = oy * pz - oz * py, oz * px - ox * pz, ox * py - oy * px
+            fx -= aly * pz - alz * py + oy * cz - oz * cy
+            fy -= alz * px - alx * pz + oz * cx - ox * cz
+            fz -= alx * py - aly * px + ox * cy - oy * cx
+        work += m * (fx * k.vx + fy * k.vy + fz * k.vz)
+        k.fx = m * fx
+        k.fy = m * fy
+        k.fz = m * (fz - g)
+        if spinning:
+            k.fx -= 2.0 * m * (oy * k.vz - oz * k.vy)
+            k.fy -= 2.0 * m * (oz * k.vx - ox * k.vz)
+            k.fz -= 2.0 * m * (ox * k.vy - oy * k.vx)
     for k in range(M.coupling.shape[0]):
         cp = M.coupling[k]
         fc, _, sep_dot = coupling(cp, berry[cp.i], berry[cp.j], kin[cp.i], kin[cp.j])
@@ -118,7 +139,6 @@ def forces(ax, az, contacts, M, W, pairs, n_pairs):
         kin[cp.j].fx -= fc
         W.coupling_power[k] = cp.damping * sep_dot * sep_dot
     diss = 0.0
-    work = 0.0
     nb = berry.shape[0]
     for kk in range(n_pairs):
         p = pairs[kk]
@@ -136,6 +156,11 @@ def forces(ax, az, contacts, M, W, pairs, n_pairs):
         diss += power
         if f != 0.0:
             ki = kin[pr.i]  # −F n on i, +F n on j (an obstacle takes it)
+            if fixed_in_world(M, pr):  # the normal of an obstacle fixed in the world is in the world frame
+                # F n·(ẋ − R ṗ): the obstacle's push on the berry as the rachis carries it, ḃ + R (ω × p)
+                work += f * (nx * ki.wvx + ny * ki.wvy + nz * ki.wvz)
+                nx, ny, nz = to_rachis(fr, nx, ny, nz)
+                work -= f * (nx * ki.vx + ny * ki.vy + nz * ki.vz)
             ki.fx -= f * nx
             ki.fy -= f * ny
             ki.fz -= f * nz
@@ -144,8 +169,6 @@ def forces(ax, az, contacts, M, W, pairs, n_pairs):
                 kj.fx += f * nx
                 kj.fy += f * ny
                 kj.fz += f * nz
-            elif not M.obstacle[pr.j - nb].attached:  # one fixed in the world moves past the berries
-                work += f * (nx * (ki.wvx - ki.vx) + nz * (ki.wvz - ki.vz))  # F n·ḃ
     return diss, work
 
 
@@ -165,6 +188,6 @@ def generalized_forces(b, k):
 
 @inline
 def pedicel_tension(b, k):
-    """§5: T = m l |u̇|² + F·u, the berry's radial balance (F includes m (g⃗ − a))."""
+    """§5: T = m l |u̇|² + F·u, the berry's radial balance (F includes gravity and the frame's fields)."""
     return b.mass * b.twig_length * (k.dux * k.dux + k.duy * k.duy + k.duz * k.duz) + k.fx * k.ux + k.fy * k.uy \
         + k.fz * k.uz

@@ -1,6 +1,6 @@
-"""Stage 1, kinematics (docs/model.md §1): twig directions, berry positions and velocities (in the rachis
-frame and in the world frame, which the rachis' displacement b separates), and the gap of a contact pair
-(two berries, or a berry and an obstacle fixed in the world: §7), each computed once per evaluation into a
+"""Stage 1, kinematics (docs/model.md §1): the rachis frame (its pose R, b and twist ḃ, ω), twig directions,
+berry positions and velocities (in the rachis frame and in the world frame, x = b + R p), and the gap of a
+contact pair (two berries, or a berry and an obstacle: §7), each computed once per evaluation into a
 `Workspace`.
 
 A planar berry has one angle s (its swing in the x–z plane); a spherical one has swing s and tilt t
@@ -34,6 +34,65 @@ KINEMATICS = np.dtype([(f, "f8") for f in (
 PAIR_FORCE = np.dtype([("force", "f8"), ("power", "f8")])   # normal force N, dissipation (F − F_el) δ̇ W
 
 
+class Frame(NamedTuple):
+    """The rachis frame at one instant: R (world from rachis, row-major), the origin b and its velocity ḃ (world),
+    ω in the rachis frame, and `turned` (1.0 when R ≠ I or ω ≠ 0: else the world frame is the rachis frame
+    shifted by b, and stage 1 skips the rotation)."""
+
+    r00: float
+    r01: float
+    r02: float
+    r10: float
+    r11: float
+    r12: float
+    r20: float
+    r21: float
+    r22: float
+    bx: float
+    by: float
+    bz: float
+    vx: float
+    vy: float
+    vz: float
+    ox: float
+    oy: float
+    oz: float
+    turned: float
+
+
+@inline
+def rachis_frame(y, M):
+    """The rachis frame y holds (physics/layout.py): R from the orientation quaternion (normalised here: the
+    integrator carries it only to its tolerance), ω turned into the rachis frame, ω_r = Rᵀ ω."""
+    o_bv, o_b, o_om, o_rot = model_offsets(M)[:4]
+    qx, qy, qz, qw = y[o_rot], y[o_rot + 1], y[o_rot + 2], y[o_rot + 3]
+    wx, wy, wz = y[o_om], y[o_om + 1], y[o_om + 2]
+    if qx == 0.0 and qy == 0.0 and qz == 0.0 and wx == 0.0 and wy == 0.0 and wz == 0.0:
+        return Frame(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, y[o_b], y[o_b + 1], y[o_b + 2],
+                     y[o_bv], y[o_bv + 1], y[o_bv + 2], 0.0, 0.0, 0.0, 0.0)
+    s = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)
+    r00, r01, r02 = 1.0 - s * (qy * qy + qz * qz), s * (qx * qy - qz * qw), s * (qx * qz + qy * qw)
+    r10, r11, r12 = s * (qx * qy + qz * qw), 1.0 - s * (qx * qx + qz * qz), s * (qy * qz - qx * qw)
+    r20, r21, r22 = s * (qx * qz - qy * qw), s * (qy * qz + qx * qw), 1.0 - s * (qx * qx + qy * qy)
+    return Frame(r00, r01, r02, r10, r11, r12, r20, r21, r22, y[o_b], y[o_b + 1], y[o_b + 2],
+                 y[o_bv], y[o_bv + 1], y[o_bv + 2],
+                 r00 * wx + r10 * wy + r20 * wz, r01 * wx + r11 * wy + r21 * wz, r02 * wx + r12 * wy + r22 * wz, 1.0)
+
+
+@inline
+def to_rachis(fr, x, y, z):
+    """Rᵀ v: a world vector in the rachis frame."""
+    return (fr.r00 * x + fr.r10 * y + fr.r20 * z, fr.r01 * x + fr.r11 * y + fr.r21 * z,
+            fr.r02 * x + fr.r12 * y + fr.r22 * z)
+
+
+@inline
+def to_world(fr, x, y, z):
+    """R v: a rachis-frame vector in the world frame."""
+    return (fr.r00 * x + fr.r01 * y + fr.r02 * z, fr.r10 * x + fr.r11 * y + fr.r12 * z,
+            fr.r20 * x + fr.r21 * y + fr.r22 * z)
+
+
 class Workspace(NamedTuple):
     """What one evaluation's stages compute, each once (MuJoCo's mjData quantities of one forward pass)."""
 
@@ -50,11 +109,11 @@ def workspace(M) -> Workspace:
 
 
 @inline
-def berry_kinematics(b, k, s, sd, t, td, bx, bz, vbx, vbz):
+def berry_kinematics(b, k, s, sd, t, td, fr):
     """§1 for berry b (a BERRY record): trig, u, u̇, p and ṗ into k (a KINEMATICS record) from its swing s,
     tilt t (ignored for a planar berry: t and ṫ are then any numbers) and their rates, and the world frame's
-    p + b, ṗ + ḃ from the rachis displacement (bx, bz) and velocity (vbx, vbz). Records and numbers only: an
-    array handed to an inlined function costs two reference counts per call."""
+    x = b + R p, ẋ = ḃ + R (ω × p + ṗ) from the rachis frame fr (a Frame). Records and numbers only: an array
+    handed to an inlined function costs two reference counts per call."""
     ss, cs = math.sin(s), math.cos(s)
     if b.n_angles == 1:
         st, ct = 0.0, 1.0
@@ -73,26 +132,29 @@ def berry_kinematics(b, k, s, sd, t, td, bx, bz, vbx, vbz):
     l = b.twig_length
     k.px, k.py, k.pz = b.hinge_x + l * ux, b.hinge_y + l * uy, b.hinge_z + l * uz
     k.vx, k.vy, k.vz = l * vx, l * vy, l * vz
-    k.wx, k.wy, k.wz = k.px + bx, k.py, k.pz + bz
-    k.wvx, k.wvy, k.wvz = k.vx + vbx, k.vy, k.vz + vbz
-
-
-@inline
-def rachis_motion(y, M):
-    """(b_x, b_z, ḃ_x, ḃ_z): the rachis displacement and velocity the state y holds (physics/layout.py)."""
-    o_bv, o_b = model_offsets(M)[:2]
-    return y[o_b], y[o_b + 1], y[o_bv], y[o_bv + 1]
+    if fr.turned == 0.0:
+        k.wx, k.wy, k.wz = k.px + fr.bx, k.py + fr.by, k.pz + fr.bz
+        k.wvx, k.wvy, k.wvz = k.vx + fr.vx, k.vy + fr.vy, k.vz + fr.vz
+        return
+    px, py, pz = to_world(fr, k.px, k.py, k.pz)
+    k.wx, k.wy, k.wz = px + fr.bx, py + fr.by, pz + fr.bz
+    ex = fr.oy * k.pz - fr.oz * k.py + k.vx  # ω × p + ṗ, rachis frame
+    ey = fr.oz * k.px - fr.ox * k.pz + k.vy
+    ez = fr.ox * k.py - fr.oy * k.px + k.vz
+    vx, vy, vz = to_world(fr, ex, ey, ez)
+    k.wvx, k.wvy, k.wvz = vx + fr.vx, vy + fr.vy, vz + fr.vz
 
 
 @inline
 def kinematics(y, M, kin):
-    """Stage 1 for every berry into kin ((N,) KINEMATICS)."""
+    """Stage 1 for every berry into kin ((N,) KINEMATICS); returns the rachis Frame."""
     berry = M.berry
     nd = M.n_dof
-    bx, bz, vbx, vbz = rachis_motion(y, M)
+    fr = rachis_frame(y, M)
     for i in range(berry.shape[0]):
         o = berry[i].dof  # a planar berry ignores t: y[o + 1] is then the next angle (y runs on past q̇)
-        berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1], bx, bz, vbx, vbz)
+        berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1], fr)
+    return fr
 
 
 @inline
@@ -120,8 +182,8 @@ def obstacle_gap(b, k, ob):
     """§7: penetration δ of berry b (its KINEMATICS k) into obstacle ob (an OBSTACLE record), its rate δ̇ and the
     normal from the berry toward the obstacle, −m (m: the obstacle's outward normal at the nearest point, so
     the pair's rule "−F n on its first body" pushes the berry out). The berry is taken in the world frame, or
-    in the rachis frame for an obstacle attached to the gripper; the obstacle does not move in its frame, so
-    δ̇ = −m·(the berry's velocity there).
+    in the rachis frame for an obstacle attached to the gripper, and the normal is in that frame; the obstacle
+    does not move in its frame, so δ̇ = −m·(the berry's velocity there).
 
     plane: δ = r − m·(x − p); box: δ = r − |x − nearest point| outside, r + (depth to the nearest face) inside;
     capsule: δ = r + ρ − |x − nearest point of its axis|."""
@@ -169,11 +231,18 @@ def obstacle_gap(b, k, ob):
 @inline
 def contact_gap(M, pr, kin):
     """(δ, δ̇, n) of contact pair pr (a PAIR record) from stage 1 in kin: its body j is a berry (j < N) or
-    obstacle j − N."""
+    obstacle j − N. n is in the rachis frame, but in the world frame for an obstacle fixed there."""
     nb = M.berry.shape[0]
     if pr.j < nb:
         return pair_gap(M.berry[pr.i], M.berry[pr.j], kin[pr.i], kin[pr.j])
     return obstacle_gap(M.berry[pr.i], kin[pr.i], M.obstacle[pr.j - nb])
+
+
+@inline
+def fixed_in_world(M, pr):
+    """Whether pair pr's body j is an obstacle fixed in the world (its gap's normal is then in the world frame)."""
+    nb = M.berry.shape[0]
+    return pr.j >= nb and not M.obstacle[pr.j - nb].attached
 
 
 @jit
@@ -181,18 +250,22 @@ def pair_state(y, M, pr, kin):
     """Stage 1 for one pair alone (the event search's root finding needs no other berry), then its gap."""
     berry = M.berry
     nd = M.n_dof
-    bx, bz, vbx, vbz = rachis_motion(y, M)
+    fr = rachis_frame(y, M)
     for i in (pr.i, pr.j):
         if i < berry.shape[0]:
             o = berry[i].dof
-            berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1], bx, bz, vbx, vbz)
+            berry_kinematics(berry[i], kin[i], y[o], y[nd + o], y[o + 1], y[nd + o + 1], fr)
     return contact_gap(M, pr, kin)
 
 
 def _padded(y, M):
     """y = [q | q̇] (or longer) padded with a resting rachis at the origin (world frame = rachis frame)."""
-    out = np.zeros(max(len(y), 2 * M.n_dof + 4))
+    from .layout import offsets
+    head = offsets.py_func(M.berry.shape[0], M.n_dof, M.coupling.shape[0])[4]
+    out = np.zeros(max(len(y), head))
     out[: len(y)] = y
+    if len(y) < head:
+        out[head - 1] = 1.0  # the orientation quaternion's w
     return out
 
 

@@ -1,11 +1,13 @@
 """Where each quantity sits in the state vector y.
 
-y = [q (D) | q̇ (D) | base velocity (2) | base displacement (2) | hinge dissipation (N)
+y = [q (D) | q̇ (D) | base velocity ḃ (3) | base displacement b (3) | base angular velocity ω (3)
+     | base orientation (4: the quaternion (x, y, z, w) of R, world from rachis) | hinge dissipation (N)
      | coupling dissipation (C) | contact dissipation (1) | base work (1)]
 
 D is the number of degrees of freedom: one angle per planar berry, two per spherical one.
 The rachis motion follows the angles so that the head of y a step's dense output is sampled on
 (events, peaks, the broad phase) places every berry in the world frame too (obstacles are fixed there).
+ḃ, b and ω are in the world frame (docs/model.md §1).
 The energy integrals ride along in y so that the same error control that keeps the angles
 accurate keeps the energy ledger closed. Per-pair impulse and dissipation are *not* in y:
 a cluster has thousands of candidate pairs and almost all of them are idle, so the solver
@@ -29,6 +31,8 @@ class Layout(NamedTuple):
     w: slice
     base_velocity: slice
     base: slice
+    base_angular_velocity: slice
+    base_orientation: slice
     d_hinge: slice
     d_coupling: slice
     d_contact: int
@@ -39,26 +43,46 @@ class Layout(NamedTuple):
 @inline
 def offsets(n, d, c):
     """The first index of each block of y for N berries, D angles and C couplings: (base velocity, base
-    displacement, hinge dissipation, coupling dissipation, contact dissipation, base work, size). The head
-    that places the berries is y[:hinge dissipation]. The one definition of the layout (compiled and not)."""
+    displacement, base angular velocity, base orientation, hinge dissipation, coupling dissipation, contact
+    dissipation, base work, size). The head that places the berries is y[:hinge dissipation]. The one
+    definition of the layout (compiled and not)."""
     o_bv = 2 * d
-    o_b = o_bv + 2
-    o_dh = o_b + 2
+    o_b = o_bv + 3
+    o_om = o_b + 3
+    o_rot = o_om + 3
+    o_dh = o_rot + 4
     o_dc = o_dh + n
     o_contact = o_dc + c
-    return o_bv, o_b, o_dh, o_dc, o_contact, o_contact + 1, o_contact + 2
+    return o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_contact + 1, o_contact + 2
 
 
 def layout(n: int, d: int, c: int) -> Layout:
-    o_bv, o_b, o_dh, o_dc, o_contact, o_w, size = offsets.py_func(n, d, c)
-    return Layout(n, d, c, slice(0, d), slice(d, 2 * d), slice(o_bv, o_b), slice(o_b, o_dh), slice(o_dh, o_dc),
-                  slice(o_dc, o_contact), o_contact, o_w, size)
+    o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_w, size = offsets.py_func(n, d, c)
+    return Layout(n, d, c, slice(0, d), slice(d, 2 * d), slice(o_bv, o_b), slice(o_b, o_om), slice(o_om, o_rot),
+                  slice(o_rot, o_dh), slice(o_dh, o_dc), slice(o_dc, o_contact), o_contact, o_w, size)
 
 
 @inline
 def model_offsets(M):
     """offsets() of a model's arrays (compiled code)."""
     return offsets(M.berry.shape[0], M.n_dof, M.coupling.shape[0])
+
+
+@inline
+def model_head(M):
+    """The length of the head of y that places every berry (angles, rates, the rachis motion): what a step's
+    dense output is sampled on for events, peaks and the broad phase."""
+    return model_offsets(M)[4]
+
+
+def initial(lay: Layout, scene, extra: int = 0) -> np.ndarray:
+    """y at a scene's start (with `extra` trailing zeros): its angles and rates, the rachis at the world origin at
+    rest in translation, in its initial orientation and angular velocity, every energy integral zero."""
+    y = np.zeros(lay.size + extra)
+    y[: 2 * lay.d] = scene.initial_state
+    y[lay.base_orientation] = scene.excitation.orientation
+    y[lay.base_angular_velocity] = scene.excitation.angular_velocity
+    return y
 
 
 #: the energy integrals that ride along in y, in the order ledger() returns them

@@ -11,7 +11,7 @@ import numpy as np
 
 from .compiled import jit
 from .forces import active, coupling, elastic_energy, forces, hinge_torque, pedicel_tension, rest_angle
-from .kinematics import contact_gap, kinematics, workspace
+from .kinematics import contact_gap, fixed_in_world, kinematics, to_rachis, workspace
 
 ENERGY_TERMS = ("kinetic", "gravity", "hinge_elastic", "coupling_elastic", "contact_elastic")
 
@@ -24,7 +24,7 @@ class Observation(NamedTuple):
     position: np.ndarray         # (S, N, 3) m: berry centres
     contact_force: np.ndarray    # (S, P) N: normal force of each pair
     penetration: np.ndarray      # (S, P) m: δ while the pair is in contact, else 0
-    contact_normal: np.ndarray   # (S, P, 3): unit normal from the pair's first berry to its second
+    contact_normal: np.ndarray   # (S, P, 3): unit normal from the pair's first berry to its second (or obstacle)
     energy: np.ndarray           # (S, 5) J: ENERGY_TERMS
 
 
@@ -37,7 +37,7 @@ def empty(n_samples: int, n_berries: int, n_dof: int, n_pairs: int) -> Observati
 @jit
 def observe(ys, contacts, accels, M, out):
     """Fill `out` for each sample s of the state ys[s] in contact state contacts[s] ((P,) CONTACT) under the
-    rachis acceleration accels[s] = (a_x, a_z)."""
+    rachis acceleration accels[s] (ACCEL_COMPONENTS, world frame)."""
     berry, pairs = M.berry, M.pair
     npair = pairs.shape[0]
     W = workspace(M)
@@ -46,12 +46,15 @@ def observe(ys, contacts, accels, M, out):
     for s in range(ys.shape[0]):
         y = ys[s]
         C = contacts[s]
-        kinematics(y, M, kin)
-        forces(accels[s, 0], accels[s, 1], C, M, W, every, npair)
+        fr = kinematics(y, M, kin)
+        a = accels[s]
+        forces((a[0], a[1], a[2], a[3], a[4], a[5]), fr, C, M, W, every, npair)
         ve = 0.0
         for p in range(npair):
             pr = pairs[p]
             delta, _, nx, ny, nz = contact_gap(M, pr, kin)
+            if fixed_in_world(M, pr):
+                nx, ny, nz = to_rachis(fr, nx, ny, nz)
             ve += elastic_energy(pairs[p], delta)
             out.contact_force[s, p] = W.pair[p].force
             out.penetration[s, p] = max(delta, 0.0) if active(C[p]) else 0.0

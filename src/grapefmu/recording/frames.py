@@ -48,8 +48,8 @@ def static_transforms(model: Model, prefix: str = PREFIX) -> list[tuple[str, str
 
 def transforms(model: Model, snap: catalogue.Snapshot, k: int, prefix: str = PREFIX):
     """(parent, child, translation, quaternion xyzw) of every moving transform at sample k."""
-    d = snap.base_displacement[k]
-    out = [(WORLD, rachis(prefix), np.array([d[0], 0.0, d[1]]), np.array([0.0, 0.0, 0.0, 1.0]))]
+    q = snap.base_orientation[k]
+    out = [(WORLD, rachis(prefix), np.array(snap.base_displacement[k], dtype=float), q / np.linalg.norm(q))]
     p = snap.observation.position[k]
     q = quaternion_z_to(hinges(model) - p)
     out += [(rachis(prefix), f"{prefix}{name}", p[i], q[i]) for i, name in enumerate(model.names)]

@@ -11,7 +11,7 @@ serialize through the one typestore (typestore.py). Topics (relative to the node
   contacts                   grapefmu_msgs/Contacts       both bodies, point, normal, depth and force of each contact
   summary                    grapefmu_msgs/Summary        simulated time and the catalogue's summary channels, named
   collision_events           grapefmu_msgs/CollisionEvent one message per finished impact
-  rachis/accel               geometry_msgs/AccelStamped   the rachis acceleration (a_x, a_z) in linear.x, linear.z
+  rachis/accel               geometry_msgs/AccelStamped   the rachis acceleration, linear and angular, world frame
   markers                    visualization_msgs/MarkerArray  rachis, twigs, berries and contact forces, frame `world`
   /tf, /tf_static            tf2_msgs/TFMessage           world → rachis → berries and hinges (frames.py)
   robot_description          std_msgs/String              URDF of the cluster, consistent with /tf
@@ -105,8 +105,10 @@ def _summary(ns: int, frame: str, row) -> object:
 
 
 def accel(ns: int, a, topic: str = "rachis/accel", prefix: str = frames.PREFIX):
-    return topic, msg("geometry_msgs/msg/AccelStamped", header=header(ns, frames.rachis(prefix)),
-                      accel={"linear": {"x": float(a[0]), "y": 0.0, "z": float(a[1])}})
+    """The rachis acceleration a (ACCEL_COMPONENTS, world frame): linear and angular parts."""
+    return topic, msg("geometry_msgs/msg/AccelStamped", header=header(ns, frames.WORLD),
+                      accel={"linear": {"x": float(a[0]), "y": float(a[1]), "z": float(a[2])},
+                             "angular": {"x": float(a[3]), "y": float(a[4]), "z": float(a[5])}})
 
 
 def clock(ns: int):

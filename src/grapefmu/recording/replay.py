@@ -319,7 +319,8 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
             t_end = seconds(sim.get(ns, ns))
             if t_end < solver.t:  # the node was reset
                 solver = Solver(scene)
-            solver.advance(t_end - solver.t, (m.accel.linear.x, m.accel.linear.z))
+            a, w = m.accel.linear, m.accel.angular
+            solver.advance(t_end - solver.t, (a.x, a.y, a.z, w.x, w.y, w.z))
             if ns in recorded:
                 compare(ns, solver.angles, solver.angular_velocities)
     if n == 0:

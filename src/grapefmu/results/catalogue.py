@@ -15,6 +15,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..model.model import Model
+from ..physics.excitation import ACCEL_COMPONENTS
 from ..physics.layout import LEDGER_TERMS
 from ..physics.observe import ENERGY_TERMS, Observation
 
@@ -29,8 +30,10 @@ class Snapshot(NamedTuple):
     angles: np.ndarray             # (S, D) rad
     angular_velocities: np.ndarray  # (S, D) rad/s
     in_contact: np.ndarray         # (S, P) bool
-    accel: np.ndarray              # (S, 2) m/s², (a_x, a_z) of the rachis
-    base_displacement: np.ndarray  # (S, 2) m, (x, z) of the rachis from its start
+    accel: np.ndarray              # (S, 6) ACCEL_COMPONENTS of the rachis: m/s², rad/s², world frame
+    base_displacement: np.ndarray  # (S, 3) m, the rachis origin's displacement from its start, world frame
+    base_angular_velocity: np.ndarray  # (S, 3) rad/s, ω of the rachis, world frame
+    base_orientation: np.ndarray   # (S, 4) the quaternion (x, y, z, w) of R, world from rachis
     ledger: np.ndarray             # (S, 4) J, physics.layout.LEDGER_TERMS: dissipated so far, work done by the base
     totals: np.ndarray             # (S,) records.TOTALS
     observation: Observation
@@ -84,12 +87,19 @@ def file_column(column: str, unit: str) -> str:
     return f"{column}_{suffix}" if suffix else column
 
 
+def rotations(quaternions: np.ndarray) -> np.ndarray:
+    """(S, 3, 3) R of quaternions (S, 4) (x, y, z, w; normalised here)."""
+    from scipy.spatial.transform import Rotation
+    return Rotation.from_quat(quaternions).as_matrix().reshape(-1, 3, 3)
+
+
 def world(s: Snapshot, points: np.ndarray) -> np.ndarray:
-    """Points (S, K, 3) in the rachis frame moved to the world frame by the rachis' displacement (x, z)."""
-    out = np.array(points, dtype=float)
-    out[..., 0] += s.base_displacement[:, None, 0]
-    out[..., 2] += s.base_displacement[:, None, 1]
-    return out
+    """Points (S, K, 3) in the rachis frame in the world frame, x = b + R p (docs/model.md §1)."""
+    points = np.asarray(points, dtype=float)
+    q = s.base_orientation
+    if q[:, :3].any():
+        points = np.einsum("sij,skj->ski", rotations(q), points)
+    return points + s.base_displacement[:, None, :]
 
 
 def _world(axis: int) -> Callable[[Snapshot], np.ndarray]:
@@ -147,10 +157,14 @@ CHANNELS: tuple[Channel, ...] = (
     Channel("in_contact", "", "pair", "boolean", "True while the pair is in contact", lambda s: s.in_contact, "contacts"),
     Channel("obstacle_force", "N", "obstacle", "real", "Sum of the contact forces of the berries on the obstacle",
             lambda s: _force(s) @ s.obstacle_pairs),
-    Channel("base_ax", "m/s2", "cluster", "real", "Rachis (gripper) acceleration along x, held over a step",
-            lambda s: s.accel[:, 0], "rachis/accel", fmi_causality="input"),
-    Channel("base_az", "m/s2", "cluster", "real", "Rachis (gripper) acceleration along z (up), held over a step",
-            lambda s: s.accel[:, 1], "rachis/accel", fmi_causality="input"),
+    *(Channel(f"base_{c}", unit, "cluster", "real", f"Rachis (gripper) {what}, world frame, held over a step",
+              lambda s, k=k: s.accel[:, k], "rachis/accel", fmi_causality="input")
+      for k, (c, unit, what) in enumerate(zip(ACCEL_COMPONENTS, ("m/s2",) * 3 + ("rad/s2",) * 3, (
+          "acceleration along x", "acceleration along y", "acceleration along z (up)",
+          "angular acceleration about x", "angular acceleration about y", "angular acceleration about z")))),
+    *(Channel(f"base_omega_{c}", "rad/s", "cluster", "real", f"Rachis (gripper) angular velocity about {c}, world "
+              "frame, set at the start of a step", lambda s, k=k: s.base_angular_velocity[:, k], "rachis/twist",
+              fmi_causality="input") for k, c in enumerate("xyz")),
     Channel("active_pairs", "", "cluster", "integer", "Berry pairs in contact now", lambda s: s.in_contact.sum(axis=1),
             "summary"),
     Channel("max_contact_force", "N", "cluster", "real", "Largest contact force now", _largest(_force), "summary"),

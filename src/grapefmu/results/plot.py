@@ -93,8 +93,7 @@ def _lines_figure(run: Run):
     ax[3].plot(t, e["base_work"], label="work by base", ls=":")
     ax[3].set_ylabel("energy (J)")
     _legend(ax[3])
-    ax[4].plot(t, run.accel[:, 0], label="ax")
-    ax[4].plot(t, run.accel[:, 1], label="az")
+    _accel(ax[4], t, run.accel)
     ax[4].set_ylabel("rachis accel (m/s²)")
     ax[4].set_xlabel("time (s)")
     _legend(ax[4])
@@ -175,11 +174,18 @@ def _cluster_figure(run: Run):
     ax.set_xlabel("time (s)")
     _legend(ax)
     ax = fig.add_subplot(grid[3, 1])
-    ax.plot(t, run.accel[:, 0], label="ax")
-    ax.plot(t, run.accel[:, 1], label="az")
+    _accel(ax, t, run.accel)
     ax.set_ylabel("rachis accel (m/s²)")
     ax.set_xlabel("time (s)")
     _legend(ax)
     if obstacles:
         _impacts_by_surface(run, fig.add_subplot(grid[4, :]))
     return fig
+
+
+def _accel(ax, t, accel) -> None:
+    """The rachis acceleration's components that are ever non-zero (a_x and a_z always)."""
+    from ..physics.excitation import ACCEL_COMPONENTS
+    for k, name in enumerate(ACCEL_COMPONENTS):
+        if k in (0, 2) or np.any(accel[:, k]):
+            ax.plot(t, accel[:, k], label=name + (" (rad/s²)" if k >= 3 else ""))

@@ -25,7 +25,7 @@ class Run:
     t: np.ndarray            # (S,) s
     y: np.ndarray            # (S, ny): physics/layout.py
     contacts: np.ndarray     # (S, P) physics.forces.CONTACT: each pair's mode, onset speed, smooth flag
-    accel: np.ndarray        # (S, 2) m/s², (a_x, a_z) of the rachis
+    accel: np.ndarray        # (S, 6) physics.excitation.ACCEL_COMPONENTS of the rachis (m/s², rad/s², world frame)
     totals: np.ndarray       # (S,) records.TOTALS at each sample (as of the solver step before it)
     impacts: Impacts
     peak_force: np.ndarray   # (P,) N, per pair, refined on the dense output where the method allows
@@ -58,6 +58,14 @@ class Run:
         return self.y[:, self.layout.base]
 
     @property
+    def base_angular_velocity(self) -> np.ndarray:
+        return self.y[:, self.layout.base_angular_velocity]
+
+    @property
+    def base_orientation(self) -> np.ndarray:
+        return self.y[:, self.layout.base_orientation]
+
+    @property
     def mode(self) -> np.ndarray:
         """(S, P) contact modes: 0 apart, 1 loaded, 2 overlapping but unloaded."""
         return self.contacts["mode"]
@@ -83,7 +91,7 @@ class Run:
 
     def snapshot(self) -> catalogue.Snapshot:
         return catalogue.Snapshot(self.t, self.angles, self.angular_velocities, self.mode != 0, self.accel,
-                                  self.base_displacement, self.ledger, self.totals, self.observation,
+                                  self.base_displacement, self.base_angular_velocity, self.base_orientation, self.ledger, self.totals, self.observation,
                                   self.scene.model.obstacle_pairs)
 
     @property

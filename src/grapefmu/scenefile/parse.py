@@ -36,13 +36,17 @@ COUPLING_KEYS = {"stiffness", "damping", "pairs"}
 #: each obstacle kind's own keys (required first), besides name, kind, attached, the law's and the thresholds'
 OBSTACLE_SHAPE_KEYS = {"plane": ("point", "normal"), "box": ("centre", "size", "yaw"), "capsule": ("ends", "radius")}
 OBSTACLE_KEYS = {"name", "kind", "attached", "bruise_force", "bruise_energy"} | (CONTACT_KEYS - {"pairs"})
+#: the rachis' initial orientation ([roll, pitch, yaw], rad, fixed axes) and angular velocity ([ω_x, ω_y, ω_z],
+#: rad/s, world frame): any excitation but a pose table (whose first row gives them) may set them
+START_KEYS = {"orientation", "angular_velocity"}
 EXCITATION_KEYS = {
-    "none": {"kind"},
-    "impulse": {"kind", "peak", "start", "duration"},
-    "sine": {"kind", "amplitude", "frequency", "start", "duration"},
-    "sweep": {"kind", "amplitude", "f_start", "f_stop", "start", "duration"},
-    "pick-and-place": {"kind", "moves", "start", "jerk_fraction"},
-    "csv": {"kind", "file", "hold", "after"},
+    "none": {"kind"} | START_KEYS,
+    "constant": {"kind", "accel", "angular_accel"} | START_KEYS,
+    "impulse": {"kind", "peak", "angular_peak", "start", "duration"} | START_KEYS,
+    "sine": {"kind", "amplitude", "angular_amplitude", "frequency", "start", "duration"} | START_KEYS,
+    "sweep": {"kind", "amplitude", "angular_amplitude", "f_start", "f_stop", "start", "duration"} | START_KEYS,
+    "pick-and-place": {"kind", "moves", "start", "jerk_fraction"} | START_KEYS,
+    "csv": {"kind", "file", "hold", "after"} | START_KEYS,
     "pose-table": {"kind", "file"},
 }
 SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events",
@@ -371,9 +375,28 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
     v.table(key, raw)
     kind = v.choice(f"{key}.kind", raw.get("kind", "none"), tuple(EXCITATION_KEYS))
     v.no_unknown_keys(key, raw, EXCITATION_KEYS[kind])
+    ex = _motion(kind, raw, key, base_dir, t_end)
+    if "orientation" in raw or "angular_velocity" in raw:
+        rpy = v.vector(f"{key}.orientation", raw.get("orientation", [0.0, 0.0, 0.0]), 3, -2 * math.pi, 2 * math.pi,
+                       "rad")
+        w = v.vector(f"{key}.angular_velocity", raw.get("angular_velocity", [0.0, 0.0, 0.0]), 3, -MAX_OMEGA, MAX_OMEGA,
+                     "rad/s")
+        ex = ex.starting(exc.quaternion_from_rpy(*rpy), w)
+    return ex
+
+
+#: the largest angular velocity or acceleration a scene may ask of the rachis (rad/s, rad/s²): beyond any robot
+MAX_OMEGA, MAX_ALPHA = 1e2, 1e4
+
+
+def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc.Excitation:
     acc = 1e3  # m/s², about 100 g: far beyond any gripper, so larger is a unit mistake
     if kind == "none":
         return exc.constant()
+    if kind == "constant":
+        return exc.constant(v.linear(f"{key}.accel", raw.get("accel", [0.0, 0.0, 0.0]), -acc, acc, "m/s²"),
+                            v.vector(f"{key}.angular_accel", raw.get("angular_accel", [0.0, 0.0, 0.0]), 3, -MAX_ALPHA,
+                                     MAX_ALPHA, "rad/s²"))
     if kind == "csv":
         f = raw.get("file")
         if not isinstance(f, str):
@@ -408,17 +431,21 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
             raise SceneError(f"{key}.moves", f"peak acceleration {peak:.3g} m/s² exceeds ±{acc:g} m/s²; lengthen a move")
         return ex
     if kind == "impulse":
-        peak = v.vector2(f"{key}.peak", raw.get("peak"), -acc, acc, "m/s²")
+        peak = v.linear(f"{key}.peak", raw.get("peak"), -acc, acc, "m/s²")
+        angular = v.vector(f"{key}.angular_peak", raw.get("angular_peak", [0.0, 0.0, 0.0]), 3, -MAX_ALPHA, MAX_ALPHA,
+                           "rad/s²")
         dur = v.number(f"{key}.duration", raw.get("duration", 0.01), 1e-6, 10.0, unit="s")
-        return exc.impulse(peak, start, dur)
-    amp = v.vector2(f"{key}.amplitude", raw.get("amplitude"), -acc, acc, "m/s²")
+        return exc.impulse(peak, start, dur, angular)
+    amp = v.linear(f"{key}.amplitude", raw.get("amplitude"), -acc, acc, "m/s²")
+    angular = v.vector(f"{key}.angular_amplitude", raw.get("angular_amplitude", [0.0, 0.0, 0.0]), 3, -MAX_ALPHA,
+                       MAX_ALPHA, "rad/s²")
     dur = v.number(f"{key}.duration", raw.get("duration", max(t_end - start, 1e-3)), 1e-3, 1e5, unit="s")
     if kind == "sine":
         f = v.number(f"{key}.frequency", raw.get("frequency"), 0.0, 1e4, lo_open=True, unit="Hz")
-        return exc.chirp("sine", amp, f, f, start, dur)
+        return exc.chirp("sine", amp, f, f, start, dur, angular)
     f0 = v.number(f"{key}.f_start", raw.get("f_start"), 0.0, 1e4, lo_open=True, unit="Hz")
     f1 = v.number(f"{key}.f_stop", raw.get("f_stop"), 0.0, 1e4, lo_open=True, unit="Hz")
-    return exc.chirp("sweep", amp, f0, f1, start, dur)
+    return exc.chirp("sweep", amp, f0, f1, start, dur, angular)
 
 
 def _thresholds(raw: Any) -> Thresholds:

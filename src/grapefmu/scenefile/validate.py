@@ -78,6 +78,15 @@ def vector2(key: str, value: Any, lo: float, hi: float, unit: str = "") -> tuple
     return (number(f"{key}[0]", value[0], lo, hi, unit=unit), number(f"{key}[1]", value[1], lo, hi, unit=unit))
 
 
+def linear(key: str, value: Any, lo: float, hi: float, unit: str = "") -> tuple[float, float, float]:
+    """A linear vector [x, y, z], or the planar pair [x, z] (y = 0)."""
+    if not isinstance(value, (list, tuple)) or len(value) not in (2, 3):
+        raise SceneError(key, f"expected [x, y, z] (or the planar [x, z]) of numbers in [{lo:g}, {hi:g}] {unit}, "
+                              f"got {show(value)}")
+    v = tuple(number(f"{key}[{k}]", x, lo, hi, unit=unit) for k, x in enumerate(value))
+    return (v[0], 0.0, v[1]) if len(v) == 2 else v
+
+
 def vector(key: str, value: Any, size: int, lo: float, hi: float, unit: str = "") -> tuple[float, ...]:
     if not isinstance(value, (list, tuple)) or len(value) != size:
         raise SceneError(key, f"expected a list of {size} numbers in [{lo:g}, {hi:g}] {unit}, got {show(value)}")

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..physics.compiled import jit
 from ..physics.kinematics import KINEMATICS, contact_gap, kinematics
-from ..physics.layout import model_offsets
+from ..physics.layout import model_head
 from .events import N_SAMPLES
 from .step import dense_head
 
@@ -49,7 +49,7 @@ def rebuild(M, contacts, Bk, B, kin, skin):
 @jit
 def sample(y0, q, h, M, work, samples):
     """Fill samples from the step's dense output (stage 1 at every sample point)."""
-    m = model_offsets(M)[2]  # the head of y: angles, rates and the rachis motion
+    m = model_head(M)  # the head of y: angles, rates and the rachis motion
     for k in range(N_SAMPLES + 1):
         dense_head(k / N_SAMPLES, y0, q, h, work, m)
         kinematics(work, M, samples[k])

@@ -16,7 +16,7 @@ from ..physics.compiled import inline, jit
 from ..physics.damage import bruise_thresholds, bruising
 from ..physics.forces import pair_law
 from ..physics.kinematics import contact_gap, pair_state
-from ..physics.layout import model_offsets
+from ..physics.layout import model_head
 from .step import dense_head
 
 EV_DELTA, EV_PHI = 0, 1
@@ -66,7 +66,7 @@ def classify(p, y, M, contacts, kin, old_mode):
 @jit
 def locate_root(fn, sign, p, ta, tb, y0, q, h, M, contacts, kin, work, tol):
     """Illinois iteration on θ ∈ [ta, tb] with v(ta) ≤ 0 < v(tb); returns the right end."""
-    m = model_offsets(M)[2]  # the head of y: angles, rates and the rachis motion
+    m = model_head(M)  # the head of y: angles, rates and the rachis motion
     dense_head(ta, y0, q, h, work, m)
     va = value_at(fn, sign, p, work, M, contacts, kin)
     dense_head(tb, y0, q, h, work, m)
@@ -101,7 +101,7 @@ def locate_root(fn, sign, p, ta, tb, y0, q, h, M, contacts, kin, work, tol):
 @jit
 def largest_on(fn, sign, p, a, b, y0, q, h, M, contacts, kin, work):
     """Golden-section search for the largest sign·fn on [a, b] (θ units); returns (θ, value)."""
-    m = model_offsets(M)[2]  # the head of y: angles, rates and the rachis motion
+    m = model_head(M)  # the head of y: angles, rates and the rachis motion
     gr = 0.6180339887498949
     c1 = b - gr * (b - a)
     c2 = a + gr * (b - a)

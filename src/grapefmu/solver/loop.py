@@ -67,7 +67,8 @@ def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
         tg = min(cur.grid_t0 + kg * dt_out, t_commit)
         dense((tg - t0) / h, y0, q, h, ys[o])
         ts[o] = tg
-        accels[o, 0], accels[o, 1] = applied_accel(X, inp, tg, t0)
+        accels[o, 0], accels[o, 1], accels[o, 2], accels[o, 3], accels[o, 4], accels[o, 5] = applied_accel(
+            X, inp, tg, t0)
         for p in range(contacts.shape[0]):
             cs[o, p] = contacts[p]
         tots[o] = totals[0]

@@ -26,7 +26,7 @@ from ..physics.excitation import base_accel, held
 from ..physics.compiled import jit
 from ..physics.forces import CONTACT, pair_force
 from ..physics.kinematics import pair_state, workspace
-from ..physics.layout import layout
+from ..physics.layout import initial, layout
 from ..results.impacts import IMPACT, Impacts
 from ..results.records import TOTALS
 from ..results.run import Run
@@ -61,8 +61,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     rows, open_imp = [], {}
     # the reference integrates each pair's impulse and dissipation as extra ODE components, which
     # rhs fills when dy has room for them (the event solver uses quadrature), so the two check each other
-    y = np.zeros(ny + 2 * npair)
-    y[: 2 * lay.d] = scene.initial_state
+    y = initial(lay, scene, 2 * npair)
     for p in range(npair):
         st["mode"][p], ddot = classify(p, y, M, st, kin, 0)
         if st["mode"][p] != 0:
@@ -121,7 +120,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
             out_t.append(seg_grid)
             out_y.append(yy)
             out_contacts.append(np.repeat(st[None, :], len(seg_grid), axis=0))
-            out_acc.append(np.array([base_accel(X, tg, t) for tg in seg_grid]).reshape(-1, 2))
+            out_acc.append(np.array([base_accel(X, tg, t) for tg in seg_grid]).reshape(-1, 6))
         for p in range(npair):
             if st["mode"][p] == 1 and t_new > t:
                 def neg_force(tt, p=p):

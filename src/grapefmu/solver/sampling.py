@@ -10,7 +10,7 @@ from ..physics.damage import detaching
 from ..physics.excitation import applied_accel
 from ..physics.forces import active, forces, pair_force, pedicel_tension
 from ..physics.kinematics import kinematics, pair_state
-from ..physics.layout import model_offsets
+from ..physics.layout import model_head
 from .events import N_SAMPLES, check_bruising, classify
 from .step import dense_head
 
@@ -22,7 +22,7 @@ GOLDEN = 0.6180339887498949
 @jit
 def force_at(theta, p, y0, q, h, M, contacts, kin, work):
     """Pair p's force at θ on the step's dense output."""
-    dense_head(theta, y0, q, h, work, model_offsets(M)[2])
+    dense_head(theta, y0, q, h, work, model_head(M))
     pr = M.pair[p]
     delta, delta_dot, _, _, _ = pair_state(work, M, pr, kin)
     return pair_force(pr, contacts[p], delta, delta_dot)[0]
@@ -35,10 +35,10 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
     berry, kin = M.berry, W.berry
     for k in range(N_SAMPLES + 1):
         th = theta_end * k / N_SAMPLES
-        dense_head(th, y0, q, h, work, model_offsets(M)[2])
-        ax, az = applied_accel(X, inp, t0 + th * h, t0)
-        kinematics(work, M, kin)
-        forces(ax, az, contacts, M, W, near, nnear)
+        dense_head(th, y0, q, h, work, model_head(M))
+        acc = applied_accel(X, inp, t0 + th * h, t0)
+        fr = kinematics(work, M, kin)
+        forces(acc, fr, contacts, M, W, near, nnear)
         for kk in range(nnear):
             p = near[kk]
             fbuf[k, kk] = W.pair[kk].force

@@ -14,6 +14,7 @@ from numba.extending import overload
 from ..physics.compiled import jit
 from ..physics.dynamics import rhs
 from ..physics.excitation import applied_accel
+from ..physics.layout import model_offsets
 from ..physics.kinematics import workspace
 from ..physics.observe import observe
 from .loop import integrate
@@ -57,7 +58,7 @@ def _new_impl(model, excitation, tableau, config, state, scratch, buffers, memor
 @jit
 def new(model, excitation, tableau, config, state, scratch, buffers, memory, backup, now):
     """A Session over these arrays (shared, not copied: the Solver keeps its numpy views of them). `buffers`
-    is the loop's loop.Buffers; `now` is (Observation, accel (1, 2), in_contact (1, P)) of one sample: what
+    is the loop's loop.Buffers; `now` is (Observation, accel (1, 6), in_contact (1, P)) of one sample: what
     `refresh` fills."""
     return _new(model, excitation, tableau, config, state, scratch, buffers, memory, backup, now)
 
@@ -71,14 +72,26 @@ def derivative(S, M, X):
 
 
 @jit
-def advance(s, dt, held, ax, az, max_steps):
-    """Save the state, hold the input (held, ax, az), integrate dt. Returns (status, t_target, finished impacts
-    in the scratch recorder); the caller restores the state (memory <- backup) if the status is a failure."""
+def advance(s, dt, held, a, omega_set, omega, max_steps):
+    """Save the state, hold the input (held, a: ACCEL_COMPONENTS), set the rachis' angular velocity to omega
+    (world, rad/s) if omega_set, integrate dt. Returns (status, t_target, finished impacts in the scratch
+    recorder); the caller restores the state (memory <- backup) if the status is a failure."""
     s.backup[:] = s.memory
     S = s.state
     inp = S.input[0]
-    if inp.held != held or inp.ax != ax or inp.az != az:
-        inp.held, inp.ax, inp.az = held, ax, az
+    changed = False
+    if (inp.held != held or inp.ax != a[0] or inp.ay != a[1] or inp.az != a[2] or inp.alpha_x != a[3]
+            or inp.alpha_y != a[4] or inp.alpha_z != a[5]):
+        inp.held, inp.ax, inp.ay, inp.az, inp.alpha_x, inp.alpha_y, inp.alpha_z = held, a[0], a[1], a[2], a[3], a[4], a[5]
+        changed = True
+    if omega_set:
+        y = S.physical.y
+        o = model_offsets(s.model)[2]
+        for k in range(3):
+            if y[o + k] != omega[k]:
+                y[o + k] = omega[k]
+                changed = True
+    if changed:
         derivative(S, s.model, s.excitation)
     t_target = S.physical.t[0] + dt
     status = integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, s.buffers, t_target, max_steps)
@@ -92,7 +105,8 @@ def refresh(s):
     S = s.state
     observation, accel, in_contact = s.now
     t = S.physical.t[0]
-    accel[0, 0], accel[0, 1] = applied_accel(s.excitation, S.input[0], t, t)
+    accel[0, 0], accel[0, 1], accel[0, 2], accel[0, 3], accel[0, 4], accel[0, 5] = applied_accel(
+        s.excitation, S.input[0], t, t)
     C = S.physical.contacts
     for p in range(C.shape[0]):
         in_contact[0, p] = C[p].mode != 0

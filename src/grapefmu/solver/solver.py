@@ -19,9 +19,9 @@ from ..model.contact import HC_MIN_APPROACH_SPEED, Law
 from ..model.model import Scene
 from ..physics import observe as obs
 from ..physics.compiled import jit
-from ..physics.excitation import INPUT, base_accel
+from ..physics.excitation import ACCEL_COMPONENTS, INPUT, base_accel
 from ..physics.kinematics import kinematics, workspace
-from ..physics.layout import LEDGER_TERMS, layout, ledger
+from ..physics.layout import LEDGER_TERMS, initial, layout, ledger
 from ..results import catalogue
 from ..results.impacts import Impacts
 from ..results.records import concat
@@ -96,26 +96,26 @@ class Solver:
                           s.contact_location == "step-control" and self.method == "event", th.bruise_force,
                           th.bruise_energy, th.detachment_force)
         self._closed: list[np.ndarray] = []
-        fresh = self._fresh_state(scene.initial_state, s.zeno_max_events, float(t_start))
+        fresh = self._fresh_state(s.zeno_max_events, float(t_start))
         self._memory, self.state = st.pack(fresh)  # the state's arrays live in _memory from now on
         self._backup = np.zeros_like(self._memory)
         self._scratch = st.recorder(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
         m, lay, y = self.model, self.layout, self.state.physical.y
-        now = (obs.empty(1, m.n_berries, m.n_dof, len(m.pairs)), np.zeros((1, 2)), np.zeros((1, len(m.pairs)), bool))
+        now = (obs.empty(1, m.n_berries, m.n_dof, len(m.pairs)), np.zeros((1, 6)), np.zeros((1, len(m.pairs)), bool))
         self._buffers = buffers(self.M, self.layout.size)
         self._session = ses.new(self.M, self.excitation, self.tableau, self.config, self.state, self._scratch,
                                 self._buffers, self._memory, self._backup, now)
         observation, accel, in_contact = now
         self._snapshot = catalogue.Snapshot(self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel,
-                                            y[None, lay.base], np.zeros((1, len(LEDGER_TERMS))),
+                                            y[None, lay.base], y[None, lay.base_angular_velocity],
+                                            y[None, lay.base_orientation], np.zeros((1, len(LEDGER_TERMS))),
                                             self.state.book.totals, observation, m.obstacle_pairs)
 
     # --- state -----------------------------------------------------------------------------------
-    def _fresh_state(self, x0: np.ndarray, zeno_max: int, t_start: float) -> st.SolverState:
+    def _fresh_state(self, zeno_max: int, t_start: float) -> st.SolverState:
         lay = self.layout
         ny, npair, n = lay.size, len(self.model.pairs), lay.n
-        y = np.zeros(ny)
-        y[: 2 * lay.d] = x0
+        y = initial(lay, self.scene)
         totals = np.zeros(1, dtype=st.TOTALS)
         totals["peak_pedicel_tension"] = -np.inf
         contacts = np.zeros(npair, dtype=st.CONTACT)
@@ -175,19 +175,18 @@ class Solver:
         return self.state.physical.contacts["mode"].copy()
 
     @property
-    def held_input(self) -> tuple[float, float] | None:
-        """The base acceleration (a_x, a_z) held since the last advance, or None: the scene's excitation."""
-        rec = self.state.input
-        return (float(rec["ax"][0]), float(rec["az"][0])) if rec["held"][0] else None
+    def held_input(self) -> tuple[float, ...] | None:
+        """The rachis acceleration (ACCEL_COMPONENTS) held since the last advance, or None: the scene's excitation."""
+        rec = self.state.input[0]
+        return tuple(float(rec[c]) for c in ACCEL_COMPONENTS) if rec["held"] else None
 
     @property
-    def base_accel(self) -> tuple[float, float]:
-        """The rachis acceleration (a_x, a_z) acting now, m/s²."""
+    def base_accel(self) -> tuple[float, ...]:
+        """The rachis acceleration acting now (ACCEL_COMPONENTS: m/s², rad/s², world frame)."""
         held = self.held_input
         if held is not None:
             return held
-        ax, az = base_accel(self.excitation, self.t, self.t)
-        return float(ax), float(az)
+        return tuple(float(v) for v in base_accel(self.excitation, self.t, self.t))
 
     @property
     def stats(self) -> dict[str, int | float]:
@@ -259,26 +258,37 @@ class Solver:
 
         return y_of
 
-    def advance(self, dt: float, base_accel: tuple[float, float] | None = None) -> None:
-        """Integrate exactly dt seconds. With base_accel = (a_x, a_z) the rachis acceleration is held at
-        that value over the interval (zero-order hold, as an FMU input or a ROS message gives it);
-        without it the scene's excitation is used. On failure the state is left unchanged.
+    def advance(self, dt: float, base_accel: tuple[float, ...] | None = None,
+                angular_velocity: tuple[float, float, float] | None = None) -> None:
+        """Integrate exactly dt seconds. With base_accel (ACCEL_COMPONENTS: a_x, a_y, a_z in m/s² and α_x, α_y,
+        α_z in rad/s², world frame; a pair is the planar (a_x, a_z)) the rachis acceleration is held at that
+        value over the interval (zero-order hold, as an FMU input or a ROS message gives it); without it the
+        scene's excitation is used. angular_velocity (rad/s, world) sets the rachis' ω at the interval's start
+        (a master that gives ω and α: ω is its value, α what it does until the next step). On failure the state
+        is left unchanged.
 
-        The common call (a float step, a tuple of two floats) is checked inline and goes to the compiled
-        side as one Session: a face's step costs about 1.6 µs more than its physics (docs/solver.md)."""
+        The common call (a float step, a tuple of six floats) is checked inline and goes to the compiled side as
+        one Session: a face's step costs about 1.6 µs more than its physics (docs/solver.md)."""
         if type(dt) is not float or not 0.0 < dt < math.inf:
             dt = _step_size(dt)
         if base_accel is None:
-            held, ax, az = False, 0.0, 0.0
+            held, a = False, _NO_ACCEL
         else:
-            held = True
-            if type(base_accel) is tuple and len(base_accel) == 2:
-                ax, az = base_accel
-            if not (type(base_accel) is tuple and len(base_accel) == 2 and type(ax) is float and type(az) is float
-                    and -MAX_ACCEL <= ax <= MAX_ACCEL and -MAX_ACCEL <= az <= MAX_ACCEL):
-                ax, az = _held_accel(base_accel)
+            held, a = True, base_accel
+            if not (type(a) is tuple and len(a) == 6 and all(type(v) is float and -MAX_ACCEL <= v <= MAX_ACCEL
+                                                             for v in a)):
+                a = _held_accel(base_accel)
+        if angular_velocity is None:
+            omega_set, omega = False, _NO_OMEGA
+        else:
+            omega_set, omega = True, _angular_velocity(angular_velocity)
+        if not all(b.spherical for b in self.model.berries) and (a[3] != 0.0 or a[5] != 0.0 or omega[0] != 0.0 or omega[2] != 0.0):
+            name = "base_accel" if a[3] != 0.0 or a[5] != 0.0 else "angular_velocity"
+            raise SolverError(f"{name}: a planar cluster turns only about the rachis' y axis (normal to its plane); "
+                              f"got angular components {(a[3], a[5]) if name == 'base_accel' else omega} about x, z "
+                              "(use spherical berries for any rotation)")
         kept = len(self._closed)
-        status, t_target, n_impacts = ses.advance(self._session, dt, held, ax, az, self.max_steps)
+        status, t_target, n_impacts = ses.advance(self._session, dt, held, a, omega_set, omega, self.max_steps)
         while n_impacts:
             self._closed_into(self._scratch)
             if status != IMPACTS_FULL:
@@ -380,12 +390,37 @@ def _step_size(dt) -> float:
     return float(dt)
 
 
-def _held_accel(base_accel) -> tuple[float, float]:
-    """(a_x, a_z) as floats, or a SolverError naming what is wrong."""
+_NO_ACCEL = (0.0,) * 6
+_NO_OMEGA = (0.0,) * 3
+#: the largest angular velocity any face accepts, rad/s (about 1600 rpm: beyond any robot wrist, so a unit mistake)
+MAX_ANGULAR_VELOCITY = 1e2
+
+
+def _held_accel(base_accel) -> tuple[float, ...]:
+    """ACCEL_COMPONENTS as floats (a pair is the planar (a_x, a_z)), or a SolverError naming what is wrong."""
     try:
-        ax, az = (float(v) for v in base_accel)
+        a = tuple(float(v) for v in base_accel)
     except (TypeError, ValueError):
-        raise SolverError(f"base_accel: expected two numbers (a_x, a_z) in m/s², got {base_accel!r}") from None
-    if not (math.isfinite(ax) and math.isfinite(az) and abs(ax) <= MAX_ACCEL and abs(az) <= MAX_ACCEL):
-        raise SolverError(f"base_accel: expected finite values within ±{MAX_ACCEL:g} m/s², got ({ax!r}, {az!r})")
-    return ax, az
+        a = ()
+    if len(a) == 2:
+        a = (a[0], 0.0, a[1], 0.0, 0.0, 0.0)
+    if len(a) != 6:
+        raise SolverError(f"base_accel: expected six numbers ({', '.join(ACCEL_COMPONENTS)}) in m/s² and rad/s², or "
+                          f"the planar pair (a_x, a_z), got {base_accel!r}")
+    for name, v in zip(ACCEL_COMPONENTS, a):
+        if not (math.isfinite(v) and abs(v) <= MAX_ACCEL):
+            raise SolverError(f"base_accel: {name} = {v!r}; expected a finite value within ±{MAX_ACCEL:g} "
+                              f"{'m/s²' if name[0] == 'a' and len(name) == 2 else 'rad/s²'}")
+    return a
+
+
+def _angular_velocity(omega) -> tuple[float, float, float]:
+    """ω as three floats, or a SolverError naming what is wrong."""
+    try:
+        w = tuple(float(v) for v in omega)
+    except (TypeError, ValueError):
+        w = ()
+    if len(w) != 3 or not all(math.isfinite(v) and abs(v) <= MAX_ANGULAR_VELOCITY for v in w):
+        raise SolverError(f"angular_velocity: expected three finite numbers (ω_x, ω_y, ω_z) within "
+                          f"±{MAX_ANGULAR_VELOCITY:g} rad/s, got {omega!r}")
+    return w

@@ -90,14 +90,14 @@ class Recorder(NamedTuple):
     t: np.ndarray          # (cap,)
     y: np.ndarray          # (cap, ny)
     contacts: np.ndarray   # (cap, P) CONTACT
-    accel: np.ndarray      # (cap, 2)
+    accel: np.ndarray      # (cap, 6) ACCEL_COMPONENTS
     totals: np.ndarray     # (cap,) TOTALS
     impacts: np.ndarray    # (cap_impacts,) IMPACT
     cursor: np.ndarray     # (1,) CURSOR
 
 
 def recorder(cap: int, ny: int, npair: int, cap_impacts: int) -> Recorder:
-    return Recorder(np.zeros(cap), np.zeros((cap, ny)), np.zeros((cap, npair), dtype=CONTACT), np.zeros((cap, 2)),
+    return Recorder(np.zeros(cap), np.zeros((cap, ny)), np.zeros((cap, npair), dtype=CONTACT), np.zeros((cap, 6)),
                     np.zeros(cap, dtype=TOTALS), np.zeros(cap_impacts, dtype=IMPACT), np.zeros(1, dtype=CURSOR))
 
 
