@@ -1,9 +1,10 @@
-"""Write the set-down examples: a 20-berry cluster lifted 7 cm, carried 25 cm over a crate's wall and lowered
-into it: a foam floor 3 cm below where the cluster started and hard plastic walls (boxes, 8 cm high) 1 cm from
-the cluster on either side, so that its lowest berries would sink 1 cm into the floor if nothing gave. Fast
-and gentle: the same path in 0.4 + 0.4 + 0.25 s or in 0.8 + 1.0 + 1.0 s.
-Run: .venv/bin/python scripts/setdown_scenes.py   -> scenes/setdown_fast.toml, scenes/setdown_gentle.toml
-The gripper only translates (a tilt on the way needs the 6-DoF rachis of issue 13, not built yet)."""
+"""Write the set-down examples: a 20-berry cluster lifted 7 cm while the gripper tilts it by TILT about y, carried
+25 cm over a crate's wall, and lowered into it while it turns back level: a foam floor 3 cm below where the
+cluster started and hard plastic walls (boxes, 8 cm high) 1 cm from the cluster on either side, so that its
+lowest berries would sink 1 cm into the floor if nothing gave. Fast and gentle: the same path in
+0.4 + 0.4 + 0.25 s or in 0.8 + 1.0 + 1.0 s (the generated tilt-carry-set-down: pick-and-place moves with a
+rotation each).
+Run: .venv/bin/python scripts/setdown_scenes.py   -> scenes/setdown_fast.toml, scenes/setdown_gentle.toml"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -17,6 +18,7 @@ from grapefmu.scenefile.toml_out import dumps
 
 HERE = Path(__file__).resolve().parents[1] / "scenes"
 LIFT, CARRY, DROP, PRESS, GAP = 0.07, 0.25, 0.03, 0.01, 0.01  # m
+TILT = 0.3  # rad, about y: the gripper's wrist turns the cluster on the way up, and back on the way down
 WALL = (0.01, 0.3, 0.08)  # m: thickness, length, height of a crate wall
 FOAM = {"law": "hunt-crossley", "stiffness": 3e4, "restitution": 0.2, "bruise_force": 2.5, "bruise_energy": 2e-3}
 PLASTIC = {"law": "hunt-crossley", "stiffness": 1e6, "restitution": 0.6, "bruise_force": 1.2, "bruise_energy": 5e-4}
@@ -35,8 +37,9 @@ def scene(lifting: float, carrying: float, lowering: float, name: str) -> dict:
         {"name": "far_wall", "centre": [CARRY + x_hi + GAP + WALL[0] / 2, 0.0, floor + WALL[2] / 2], **wall},
     ]
     doc["excitation"] = {"kind": "pick-and-place", "start": 0.1, "moves": [
-        {"displacement": [0.0, LIFT], "duration": lifting}, {"displacement": [CARRY, 0.0], "duration": carrying},
-        {"displacement": [0.0, -(LIFT + DROP + PRESS)], "duration": lowering}]}
+        {"displacement": [0.0, 0.0, LIFT], "rotation": [0.0, TILT, 0.0], "duration": lifting},
+        {"displacement": [CARRY, 0.0, 0.0], "duration": carrying},
+        {"displacement": [0.0, 0.0, -(LIFT + DROP + PRESS)], "rotation": [0.0, -TILT, 0.0], "duration": lowering}]}
     doc["solver"] = {**doc["solver"], "t_end": round(0.1 + lifting + carrying + lowering + 0.6, 3)}
     return doc
 

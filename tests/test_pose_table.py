@@ -122,9 +122,8 @@ def test_a_held_table_converges_to_the_table_as_the_step_shrinks(tmp_path):
     (lambda r: r.__setitem__(5, [r[3][0] - 1e-3, *r[5][1:]]), "row 6 column time"),  # unsorted
     (lambda r: r[2].__setitem__(3, "nan"), "row 3 column z"),
     (lambda r: r[4].__setitem__(7, 0.9), "row 5 column qw"),                       # not a unit quaternion
-    (lambda r: r[6].__setitem__(slice(6, 8), [math.sin(0.2), math.cos(0.2)]), "row 7 column qz"),  # it turns
-    (lambda r: r[8].__setitem__(2, 0.06), "row 9 column y"),                       # and moves sideways
-    (lambda r: r[10].__setitem__(1, 5.0), "columns x, z"),                         # a jump: positions in mm?
+    (lambda r: r[10].__setitem__(1, 5.0), "columns x, y, z"),                      # a jump: positions in mm?
+    (lambda r: r[10].__setitem__(slice(6, 8), [math.sin(1.0), math.cos(1.0)]), "columns qx, qy, qz, qw"),  # a turn jump
 ])
 def test_bad_pose_tables_are_refused_naming_row_and_column(tmp_path, change, where):
     t = np.arange(0.0, T + 1e-9, 0.01)
@@ -148,3 +147,48 @@ def test_an_fmu_is_not_built_from_a_pose_table_scene(tmp_path):
                         str(tmp_path / "x.fmu")], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode != 0 and "pose-table" in r.stderr and "base_ax" in r.stderr
     assert not (tmp_path / "x.fmu").exists()
+
+
+def turning_table(path: Path, hz: float, rpy, move=(DX, 0.02, DZ)) -> Path:
+    """A minimum-jerk move that turns by the fixed-axis angles rpy (rad) on the way, sampled at hz."""
+    t = np.arange(0.0, T + 1e-9, 1.0 / hz)
+    u = minimum_jerk(t)[0][:, None] / DX
+    np.savetxt(path, np.column_stack([t, u * np.array(move), u * np.array(rpy)]), delimiter=",",
+               header="time,x,y,z,roll,pitch,yaw", comments="")
+    return path
+
+
+def spherical_table_scene(path: Path) -> dict:
+    return {"name": "turning", "berries": [
+        {"name": "a", "kind": "spherical", "mass": 0.011, "radius": 0.0135, "twig_length": 0.03,
+         "hinge": [-0.015, 0.0, 0.0], "hinge_stiffness": 1e-3, "hinge_damping": 2e-5, "azimuth": 0.5},
+        {"name": "b", "kind": "spherical", "mass": 0.012, "radius": 0.014, "twig_length": 0.04,
+         "hinge": [0.015, 0.0, 0.0], "hinge_stiffness": 1e-3, "hinge_damping": 2e-5, "angle": [0.2, 0.1]}],
+        "contact": {"law": "hertz", "effective_modulus": 1e6},
+        "excitation": {"kind": "pose-table", "file": str(path)},
+        "solver": {"t_end": 0.7, "rtol": 1e-10, "atol": 1e-13}}
+
+
+@pytest.mark.parametrize("rpy, order", [((0.0, 0.5, 0.0), 16.0), ((0.3, 0.5, 0.4), 4.0)])
+def test_the_rachis_turns_with_a_sampled_motion_to_the_schemes_error(tmp_path, rpy, order):
+    """Orientation against the analytic turn: O(h⁴) about a fixed axis (the spline), O(h²) about a moving one (α
+    tabulated between rows); the energy ledger closes while the rachis turns and the berries collide."""
+    from scipy.spatial.transform import Rotation
+
+    err = {}
+    for hz in (100, 50):
+        run = simulate(scene(spherical_table_scene(turning_table(tmp_path / f"p{hz}.csv", hz, rpy))))
+        u = minimum_jerk(run.t)[0][:, None] / DX
+        err[hz] = (Rotation.from_euler("xyz", u * np.array(rpy)).inv()
+                   * Rotation.from_quat(run.base_orientation)).magnitude().max()
+        assert np.abs(run.base_displacement - u * np.array([DX, 0.02, DZ])).max() < 2e-6
+        assert run.ledger_error() < 1e-8
+    assert err[100] < 2e-6  # rad
+    assert 0.7 * order < err[50] / err[100] < 1.3 * order, err
+
+
+def test_a_planar_scene_refuses_a_table_that_rolls(tmp_path):
+    path = turning_table(tmp_path / "roll.csv", 100, (0.2, 0.0, 0.0))
+    with pytest.raises(GrapefmuError) as err:
+        scene(table_scene(path))
+    assert "excitation.file" in str(err.value) and "y axis" in str(err.value)

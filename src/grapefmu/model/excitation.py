@@ -149,26 +149,29 @@ def integrate_table(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v, x
 
 
-def pick_and_place(moves: list[tuple[tuple[float, float], float]], start: float = 0.0,
-                   jerk_fraction: float = 0.125) -> Excitation:
-    """Rest-to-rest moves in sequence, each (displacement (dx, dy) in m, duration in s).
+def pick_and_place(moves, start: float = 0.0, jerk_fraction: float = 0.125) -> Excitation:
+    """Rest-to-rest moves in sequence, each (displacement, duration) or (displacement, duration, rotation):
+    displacement (dx, dy, dz) in m (a pair is the planar (dx, dz)), rotation a rotation vector (rad, world axes:
+    the rachis turns by |rotation| about that fixed axis during the move; a tilt, a swing round).
 
-    A move of zero displacement is a dwell. Acceleration is piecewise linear, so jerk is
-    bounded and the gripper starts and ends every move at rest.
+    A move of zero displacement and rotation is a dwell. The linear and the angular acceleration are piecewise
+    linear and share one profile, so jerk is bounded, the gripper starts and ends every move at rest, and the
+    rachis follows the moves exactly (to the solver's tolerance: a turn about a fixed axis integrates exactly).
     """
     u, shape = _unit_move_profile(jerk_fraction)
-    _, x_unit = integrate_table(np.column_stack([u, shape, np.zeros_like(u)]))
+    _, x_unit = integrate_table(np.column_stack([u, shape]))
     reach = x_unit[-1, 0]  # displacement of a unit-peak, unit-duration move
-    rows = [[0.0, 0.0, 0.0]] if start > 0 else []
+    rows = [[0.0] * 7] if start > 0 else []
     t0 = start
-    for (dx, dy), dur in moves:
-        peak = math.hypot(dx, dy) / (reach * dur * dur)
-        ux, uy = (dx, dy) if peak == 0 else (dx / math.hypot(dx, dy), dy / math.hypot(dx, dy))
+    for move in moves:
+        d, dur = vector3(move[0]), float(move[1])
+        turn = np.asarray(move[2] if len(move) > 2 else (0.0, 0.0, 0.0), dtype=float)
+        per_peak = np.array([*d, *turn]) / (reach * dur * dur)  # each component's peak acceleration
         for uk, sk in zip(u, shape):
             tk = t0 + uk * dur
             if rows and abs(rows[-1][0] - tk) < 1e-15:
                 continue
-            rows.append([tk, peak * sk * ux, peak * sk * uy])
+            rows.append([tk, *(per_peak * sk)])
         t0 += dur
     desc = f"pick-and-place: {len(moves)} moves, {t0 - start:g} s from {start:g} s"
     return table("pick-and-place", np.array(rows), desc)
@@ -218,17 +221,28 @@ ORIENTATIONS = (("roll", "pitch", "yaw"), ("qx", "qy", "qz", "qw"))
 POSE_MAX_ACCEL = 1e3
 
 
+#: the largest angular acceleration a pose table may ask for, rad/s² (beyond it the orientations jump)
+POSE_MAX_ALPHA = 1e4
+#: sub-intervals per row interval of a pose table that turns about a moving axis (its α is not piecewise linear
+#: there, and the compiled table is): benchmarks/pose_table_error.py gives the error this leaves
+POSE_TURN_SUBDIVISION = 4
+
+
 def read_pose_table(path: Path, key: str) -> Excitation:
     """The gripper's recorded poses (CSV with a header: time, x, y, z and roll, pitch, yaw or qx, qy, qz, qw; m,
-    rad, s) as the rachis motion. Positions are interpolated by a cubic spline with zero velocity at both ends
-    (C2: its acceleration is piecewise linear, so the excitation is exactly a linear acceleration table and the
-    rachis follows the spline to the solver's tolerance); the spline's error against a smooth motion sampled
-    every h is O(h⁴). Before the first row and after the last the gripper rests, and the rachis' displacement is
-    counted from the first row's position (the world frame is the rachis frame at t = 0).
+    rad, s) as the rachis motion.
 
-    The rachis does not yet turn or move sideways (the 6-DoF rachis of issue 13 is not built): a table whose
-    orientation or y changes is refused, naming the row and column."""
+    Positions: a cubic spline with zero velocity at both ends (C2: its acceleration is piecewise linear, so the
+    excitation is exactly a linear acceleration table and the rachis follows the spline to the solver's
+    tolerance; the spline's error against a smooth motion sampled every h is O(h⁴)). Orientations: the rotation
+    vector φ(t) of R₀ᵀ R(t) (R₀ the first row's; unwrapped through ±π) by the same clamped spline, so the
+    orientation R₀ exp(φ(t)) is C2 with zero angular velocity at both ends. The rachis' angular acceleration is
+    α = R ω̇_b, ω_b = J_r(φ) φ̇ (J_r the right Jacobian of SO(3)): piecewise linear for a turn about one fixed
+    axis (exact, like the positions); about a moving axis it is tabulated at POSE_TURN_SUBDIVISION points per
+    row interval and linear in between. The world frame is the table's, shifted so that the rachis starts at its
+    origin; it starts in the first row's orientation; before the first row and after the last it rests."""
     from scipy.interpolate import CubicSpline
+    from scipy.spatial.transform import Rotation
 
     raw = _csv_rows(path, key, "CSV pose table")
     if not raw:
@@ -263,29 +277,68 @@ def read_pose_table(path: Path, key: str) -> Excitation:
         if bad.size:
             raise SceneError(key, f"{path} row {bad[0] + 1} column qw: the quaternion's norm is {norm[bad[0]]:.9g}; "
                                   "expected a unit quaternion (within 1e-6)")
-        q = arr[:, 4:8] * np.sign(np.sum(arr[:, 4:8] * arr[0, 4:8], axis=1))[:, None]  # q and −q: the same turn
-        change = np.abs(q - q[0])
+        rot = Rotation.from_quat(arr[:, 4:8])
     else:
-        change = np.abs(arr[:, 4:7] - arr[0, 4:7])
-    for columns, moved, what in ((orientation, change, "turns"), (("y",), np.abs(arr[:, 2:3] - arr[0, 2]),
-                                                                  "moves sideways")):
-        rows_moved = np.flatnonzero(moved.max(axis=1) > 1e-9)
-        if rows_moved.size:
-            n = int(rows_moved[0])
-            column = columns[int(np.argmax(moved[n] > 1e-9))]
-            raise SceneError(key, f"{path} row {n + 1} column {column}: the gripper {what} here; this version moves "
-                                  "the rachis in x and z only (rotation and lateral motion: the 6-DoF rachis, not "
-                                  "built yet)")
-    spline = CubicSpline(t, arr[:, [1, 3]], bc_type="clamped")
+        rot = Rotation.from_euler("xyz", arr[:, 4:7])
+    phi = _unwrapped((rot[0].inv() * rot).as_rotvec())
+    spline = CubicSpline(t, arr[:, 1:4], bc_type="clamped")
     accel = spline(t, 2)
     worst = int(np.argmax(np.abs(accel).max(axis=1)))
     if np.abs(accel[worst]).max() > POSE_MAX_ACCEL:
-        raise SceneError(key, f"{path} row {worst + 1} columns x, z: following these positions needs "
+        raise SceneError(key, f"{path} row {worst + 1} columns x, y, z: following these positions needs "
                               f"{np.abs(accel[worst]).max():.3g} m/s² (more than {POSE_MAX_ACCEL:g}): a jump the "
                               "interpolation cannot follow (a glitch, or positions in mm?)")
-    desc = f"pose table: {path.name}, {len(t)} poses from {t[0]:g} to {t[-1]:g} s, cubic spline"
-    ex = table("pose-table", np.column_stack([t, accel]), desc)
-    return Excitation(ex.kind, ex.arrays, ex.description, math.inf, key)
+    turn = CubicSpline(t, phi, bc_type="clamped")
+    axis = phi[np.argmax(np.linalg.norm(phi, axis=1))]
+    fixed_axis = not axis.any() or np.abs(np.cross(phi, axis)).max() <= 1e-12 * max(np.linalg.norm(axis), 1.0)
+    knots = t if fixed_axis else np.concatenate(
+        [np.linspace(a, b, POSE_TURN_SUBDIVISION, endpoint=False) for a, b in zip(t[:-1], t[1:])] + [t[-1:]])
+    alpha = _angular_accel(turn, rot[0], knots)
+    worst = int(np.argmax(np.abs(alpha).max(axis=1)))
+    if np.abs(alpha[worst]).max() > POSE_MAX_ALPHA:
+        row = int(np.searchsorted(t, knots[worst], side="right"))
+        raise SceneError(key, f"{path} row {row} columns {', '.join(orientation)}: following these orientations needs "
+                              f"{np.abs(alpha[worst]).max():.3g} rad/s² (more than {POSE_MAX_ALPHA:g}): a jump the "
+                              "interpolation cannot follow (a glitch, or angles in degrees?)")
+    desc = (f"pose table: {path.name}, {len(t)} poses from {t[0]:g} to {t[-1]:g} s, cubic splines of position and "
+            f"rotation vector{'' if fixed_axis else f' (α at {POSE_TURN_SUBDIVISION} points per row)'}")
+    ex = table("pose-table", np.column_stack([knots, spline(knots, 2), alpha]), desc)
+    q0 = tuple(float(c) for c in rot[0].as_quat())
+    return Excitation(ex.kind, ex.arrays, ex.description, math.inf, key, q0)
+
+
+def _unwrapped(phi: np.ndarray) -> np.ndarray:
+    """Rotation vectors made continuous: each row the one of its two equivalents (φ, φ − 2π φ/|φ|) nearer the
+    previous row's (as_rotvec keeps |φ| ≤ π, so a turn through π would jump)."""
+    out = phi.copy()
+    for k in range(1, len(out)):
+        theta = np.linalg.norm(out[k])
+        if theta > 0.0:
+            other = out[k] - 2.0 * math.pi * out[k] / theta
+            if np.linalg.norm(other - out[k - 1]) < np.linalg.norm(out[k] - out[k - 1]):
+                out[k] = other
+    return out
+
+
+def _body_rate(phi: np.ndarray, dphi: np.ndarray) -> np.ndarray:
+    """ω_b = J_r(φ) φ̇ (rows), the body angular velocity of R₀ exp(φ)."""
+    theta = np.linalg.norm(phi, axis=1, keepdims=True)
+    small = theta < 1e-6
+    th = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta ** 2 / 24.0, (1.0 - np.cos(th)) / th ** 2)
+    b = np.where(small, 1.0 / 6.0 - theta ** 2 / 120.0, (th - np.sin(th)) / th ** 3)
+    c1 = np.cross(phi, dphi)
+    return dphi - a * c1 + b * np.cross(phi, c1)
+
+
+def _angular_accel(turn, r0, t: np.ndarray) -> np.ndarray:
+    """α(t) = R ω̇_b (world frame) of the orientation R₀ exp(φ(t)), φ the spline `turn`: ω̇_b by a central
+    difference of the exact ω_b (Rω̇_b: Ṙ ω_b = R (ω_b × ω_b) = 0), inside the spline's own pieces."""
+    from scipy.spatial.transform import Rotation
+    h = 1e-6 * max(float(t[-1] - t[0]), 1e-3)
+    lo, hi = np.maximum(t - h, t[0]), np.minimum(t + h, t[-1])
+    wdot = (_body_rate(turn(hi), turn(hi, 1)) - _body_rate(turn(lo), turn(lo, 1))) / (hi - lo)[:, None]
+    return (r0 * Rotation.from_rotvec(turn(t))).apply(wdot)
 
 
 def zero_order_hold(rows: np.ndarray) -> np.ndarray:

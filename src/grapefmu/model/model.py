@@ -6,6 +6,7 @@ that turn forces into detachment and damage indicators.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import NamedTuple
@@ -162,24 +163,35 @@ class Model:
     def planar(self) -> bool:
         return not any(b.spherical for b in self.berries)
 
-    def refuses_turn(self, excitation) -> tuple[str, str] | None:
-        """(scene key, why) this model cannot follow the excitation's rotation, or None. A planar berry swings in
-        the rachis' x–z plane, so the rachis may turn only about its y axis (an orientation about y, ω and α
-        along y)."""
+    def plane_normal(self, excitation) -> np.ndarray | None:
+        """The world direction of the rachis' y axis at the start, n = R₀ ŷ, if any berry is planar (its swing
+        plane is the rachis' x–z plane), else None."""
         if all(b.spherical for b in self.berries):
             return None
+        from scipy.spatial.transform import Rotation
+        return Rotation.from_quat(excitation.orientation).apply([0.0, 1.0, 0.0])
+
+    def refuses_turn(self, excitation) -> tuple[str, str] | None:
+        """(scene key, why) this model cannot follow the excitation's rotation, or None. A planar berry swings in
+        the rachis' x–z plane: that plane must be vertical (n = R₀ ŷ horizontal) and the rachis may turn only
+        about n (ω and α along n), which keeps it so."""
+        n = self.plane_normal(excitation)
+        if n is None:
+            return None
         a = excitation.arrays
-        alpha = a.table[:, [4, 6]] if a.kind == TABLE else a.par[[3, 5]]
-        q = excitation.orientation
-        w = excitation.angular_velocity
+        alpha = a.table[:, 4:7] if a.kind == TABLE else a.par[3:6].reshape(1, 3)
         alpha_key = {"constant": "angular_accel", "impulse": "angular_peak", "sine": "angular_amplitude",
                      "sweep": "angular_amplitude"}.get(excitation.kind, "file")
-        for key, what, bad in (("orientation", "the initial orientation", q[0] != 0.0 or q[2] != 0.0),
-                               ("angular_velocity", "the initial angular velocity", w[0] != 0.0 or w[2] != 0.0),
-                               (alpha_key, "the angular acceleration", bool(np.any(alpha != 0.0)))):
-            if bad:
-                return (f"excitation.{key}", f"{what} turns the rachis about x or z; planar berries swing in the "
-                        "rachis' x–z plane and follow rotation about y only (use spherical berries for any rotation)")
+        if abs(n[2]) > 1e-9:
+            return ("excitation.orientation", f"the initial orientation tilts the rachis' y axis {math.degrees(math.asin(min(abs(n[2]), 1.0))):.3g}° "
+                    "out of the horizontal; planar berries swing in the rachis' x–z plane, which must stay vertical "
+                    "(turn about y and z only; use spherical berries for any orientation)")
+        for key, what, w in (("angular_velocity", "the initial angular velocity", np.asarray(excitation.angular_velocity)),
+                             (alpha_key, "the angular acceleration", alpha)):
+            if off_axis(w, n):
+                return (f"excitation.{key}", f"{what} turns the rachis about an axis other than its y axis "
+                        f"{tuple(round(float(c), 6) for c in n)} (world); planar berries swing in the rachis' x–z "
+                        "plane and follow rotation about y only (use spherical berries for any rotation)")
         return None
 
     @property
@@ -257,6 +269,13 @@ class Thresholds:
     bruise_force: float = 1.7       # N, peak contact force of one impact
     bruise_energy: float = 1e-3     # J, energy dissipated in one impact
     fatigue_fraction: float = 0.5   # impacts above this fraction of bruise_force count toward fatigue
+
+
+def off_axis(w, n) -> bool:
+    """Whether any of the vectors w (..., 3) has a component across the unit axis n (relative 1e-9)."""
+    w = np.asarray(w, dtype=float).reshape(-1, 3)
+    across = np.cross(w, n)
+    return bool(np.any(np.abs(across) > 1e-9 * np.maximum(np.abs(w).max(axis=1, keepdims=True), 1e-300)))
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ import numpy as np
 
 from .compiled import inline, jit
 from ..model.model import BOX, PLANE
-from .layout import model_offsets
+from .layout import model_head, model_offsets
 
 #: what stage 1 (and stage 2's force) computes per berry, rachis frame
 KINEMATICS = np.dtype([(f, "f8") for f in (
@@ -260,8 +260,7 @@ def pair_state(y, M, pr, kin):
 
 def _padded(y, M):
     """y = [q | q̇] (or longer) padded with a resting rachis at the origin (world frame = rachis frame)."""
-    from .layout import offsets
-    head = offsets.py_func(M.berry.shape[0], M.n_dof, M.coupling.shape[0])[4]
+    head = model_head.py_func(M)
     out = np.zeros(max(len(y), head))
     out[: len(y)] = y
     if len(y) < head:

@@ -415,20 +415,26 @@ def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc
     if kind == "pick-and-place":
         moves_raw = raw.get("moves")
         if not isinstance(moves_raw, list) or not moves_raw:
-            raise SceneError(f"{key}.moves", "expected a list of {displacement = [dx, dy], duration = T} tables")
+            raise SceneError(f"{key}.moves", "expected a list of {displacement = [dx, dy, dz], duration = T} tables "
+                                             "(optionally rotation = [rx, ry, rz])")
         moves = []
         for n, m in enumerate(moves_raw):
             mk = f"{key}.moves[{n}]"
             v.table(mk, m)
-            v.no_unknown_keys(mk, m, {"displacement", "duration"})
-            d = v.vector2(f"{mk}.displacement", m.get("displacement"), -10.0, 10.0, "m")
+            v.no_unknown_keys(mk, m, {"displacement", "duration", "rotation"})
+            d = v.linear(f"{mk}.displacement", m.get("displacement", [0.0, 0.0, 0.0]), -10.0, 10.0, "m")
             T = v.number(f"{mk}.duration", m.get("duration"), 1e-3, 1e4, unit="s")
-            moves.append((d, T))
+            r = v.vector(f"{mk}.rotation", m.get("rotation", [0.0, 0.0, 0.0]), 3, -4 * math.pi, 4 * math.pi, "rad")
+            moves.append((d, T, r))
         jf = v.number(f"{key}.jerk_fraction", raw.get("jerk_fraction", 0.125), 0.0, 0.25, lo_open=True)
         ex = exc.pick_and_place(moves, start, jf)
-        peak = abs(ex.arrays.table[:, 1:]).max()
+        peak = abs(ex.arrays.table[:, 1:4]).max()
         if peak > acc:
             raise SceneError(f"{key}.moves", f"peak acceleration {peak:.3g} m/s² exceeds ±{acc:g} m/s²; lengthen a move")
+        peak = abs(ex.arrays.table[:, 4:7]).max()
+        if peak > MAX_ALPHA:
+            raise SceneError(f"{key}.moves", f"peak angular acceleration {peak:.3g} rad/s² exceeds ±{MAX_ALPHA:g} "
+                                             "rad/s²; lengthen a move")
         return ex
     if kind == "impulse":
         peak = v.linear(f"{key}.peak", raw.get("peak"), -acc, acc, "m/s²")

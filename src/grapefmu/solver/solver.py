@@ -16,7 +16,7 @@ import numpy as np
 
 from ..errors import SolverError
 from ..model.contact import HC_MIN_APPROACH_SPEED, Law
-from ..model.model import Scene
+from ..model.model import Scene, off_axis
 from ..physics import observe as obs
 from ..physics.compiled import jit
 from ..physics.excitation import ACCEL_COMPONENTS, INPUT, base_accel
@@ -87,6 +87,7 @@ class Solver:
         self.M = scene.model.arrays
         self.excitation = scene.excitation.arrays
         self.layout = layout(self.model.n_berries, self.model.n_dof, len(self.model.couplings))
+        self._plane_normal = self.model.plane_normal(scene.excitation)
         if skin is None:
             skin = SKIN_FRACTION * float(np.mean([b.radius for b in self.model.berries]))
         th = scene.thresholds
@@ -282,11 +283,13 @@ class Solver:
             omega_set, omega = False, _NO_OMEGA
         else:
             omega_set, omega = True, _angular_velocity(angular_velocity)
-        if not all(b.spherical for b in self.model.berries) and (a[3] != 0.0 or a[5] != 0.0 or omega[0] != 0.0 or omega[2] != 0.0):
-            name = "base_accel" if a[3] != 0.0 or a[5] != 0.0 else "angular_velocity"
-            raise SolverError(f"{name}: a planar cluster turns only about the rachis' y axis (normal to its plane); "
-                              f"got angular components {(a[3], a[5]) if name == 'base_accel' else omega} about x, z "
-                              "(use spherical berries for any rotation)")
+        n = self._plane_normal
+        if n is not None and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]) and (
+                off_axis(a[3:], n) or off_axis(omega, n)):
+            name = "base_accel" if off_axis(a[3:], n) else "angular_velocity"
+            raise SolverError(f"{name}: a planar cluster turns only about the rachis' y axis "
+                              f"{tuple(round(float(c), 6) for c in n)} (world; normal to its plane), got "
+                              f"{a[3:] if name == 'base_accel' else omega} (use spherical berries for any rotation)")
         kept = len(self._closed)
         status, t_target, n_impacts = ses.advance(self._session, dt, held, a, omega_set, omega, self.max_steps)
         while n_impacts:
