@@ -91,7 +91,8 @@ class Solver:
         self.M = scene.arrays
         self.excitation = scene.excitation.arrays
         self.layout = scene.layout
-        self._plane_normal = self.model.plane_normal(scene.excitation)
+        n = self.model.plane_normal(scene.excitation)
+        self._plane_normal = None if n is None else tuple(float(c) for c in n)  # floats: off_axis without numpy
         if skin is None:
             skin = SKIN_FRACTION * float(np.mean([b.radius for b in self.model.berries]))
         th = scene.thresholds
@@ -272,8 +273,9 @@ class Solver:
         (a master that gives ω and α: ω is its value, α what it does until the next step). On failure the state
         is left unchanged.
 
-        The common call (a float step, a tuple of six floats) is checked inline and goes to the compiled side as
-        one Session: a face's step costs about 1.6 µs more than its physics (docs/solver.md)."""
+        The common call (a float step, a tuple of six floats, ω None or a tuple of three floats) is checked inline
+        and goes to the compiled side as one Session: a face's step costs about 1.6 µs more than its physics
+        (docs/solver.md)."""
         if type(dt) is not float or not 0.0 < dt < math.inf:
             dt = _step_size(dt)
         if base_accel is None:
@@ -286,7 +288,10 @@ class Solver:
         if angular_velocity is None:
             omega_set, omega = False, _NO_OMEGA
         else:
-            omega_set, omega = True, _angular_velocity(angular_velocity)
+            omega_set, omega = True, angular_velocity
+            if not (type(omega) is tuple and len(omega) == 3 and all(
+                    type(v) is float and -MAX_ANGULAR_VELOCITY <= v <= MAX_ANGULAR_VELOCITY for v in omega)):
+                omega = _angular_velocity(angular_velocity)
         if not self.layout.turning and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
             raise SolverError("base_accel, angular_velocity: this solver's rachis does not turn (its scene does "
                               "not turn it); build it with Solver(scene, turning=True) to drive rotation as an input")
