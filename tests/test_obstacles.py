@@ -133,7 +133,7 @@ def test_the_fmu_reports_obstacle_totals_that_match_the_core(tmp_path):
     from pathlib import Path
 
     from grapefmu.model.excitation import pick_and_place
-    from grapefmu.physics.excitation import accel
+    from grapefmu.physics.excitation import ACCEL_COMPONENTS, accel
     from grapefmu.scenefile.toml_out import dumps
 
     root = Path(__file__).resolve().parents[1]
@@ -141,8 +141,8 @@ def test_the_fmu_reports_obstacle_totals_that_match_the_core(tmp_path):
     (tmp_path / "setdown.toml").write_text(dumps(doc))
     t = np.round(np.arange(0, 1.0 + 1e-9, 1e-2), 10)
     ex = pick_and_place([((0.05, -0.012), 0.4)])
-    np.savetxt(tmp_path / "signal.csv", np.column_stack([t, accel(ex, t)]), delimiter=",", header="time,ax,az",
-               comments="")
+    np.savetxt(tmp_path / "signal.csv", np.column_stack([t, accel(ex, t)]), delimiter=",",
+               header=",".join(["time", *ACCEL_COMPONENTS]), comments="")
     subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", str(tmp_path / "setdown.toml"), "-o",
                     str(tmp_path / "setdown.fmu")], check=True, capture_output=True, cwd=root)
     names = ["angle_left", "angle_right", "contact_force_left_floor", "contact_force_right_floor",
