@@ -73,15 +73,18 @@ def collision():
                          [("DOP853", 1e-9, None), ("DOP853", 1e-9, 1e-3), ("RK45", 1e-8, None)])
 def test_lean_scipy_driver_agrees_with_the_event_solver(collision, integrator, rtol, skin):
     """The lean scipy driver shares only the RHS and the mode rules with grapefmu: the same impacts and the same
-    angles to its tolerance, every pair watched one by one or (skin) apart pairs sharing one event."""
+    angles to its tolerance, every pair watched one by one or (skin) apart pairs sharing one event. Its error norm
+    is scipy's RMS over the head of the state, angles and rates (2D) and the rachis' pose and twist (13, idle
+    here), so at a given rtol its angles are √((2D + 13)/2D) times looser than over the angles alone: the bound."""
     sc, ours = collision
     r = simulate_lean(sc, rtol=rtol, atol=rtol * 1e-2, integrator=integrator, skin=skin)
+    bound = 10 * rtol * math.sqrt((2 * sc.model.n_dof + 13) / (2 * sc.model.n_dof))
     assert len(r.onsets) == len(ours.impacts) == 3
-    assert np.abs(r.onsets - np.sort(ours.impacts.onset)).max() < 10 * rtol
+    assert np.abs(r.onsets - np.sort(ours.impacts.onset)).max() < bound
     assert r.t.shape == ours.t.shape and np.allclose(r.t, ours.t, rtol=0, atol=1e-12)
-    assert np.abs(r.y[:, : sc.model.n_dof] - ours.angles).max() < 10 * rtol
+    assert np.abs(r.y[:, : sc.model.n_dof] - ours.angles).max() < bound
     final = np.r_[ours.angles[-1], ours.angular_velocities[-1]]
-    assert np.abs(r.final[: 2 * sc.model.n_dof] - final).max() < 10 * rtol
+    assert np.abs(r.final[: 2 * sc.model.n_dof] - final).max() < bound
     assert np.array_equal(r.modes, ours.contacts[-1]["mode"])
     assert r.rhs_evaluations > 0 and r.segments == 1 + 3 * 3 + (skin is not None)  # onset, unload, release
 

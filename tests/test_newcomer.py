@@ -395,9 +395,9 @@ def test_a_csv_excitation_that_ends_early_is_refused_unless_after_says_what_foll
     assert e.value.key == "excitation.file" and "after" in str(e.value) and "0.2 s" in str(e.value)
     assert simulate(scene(_csv_doc(tmp_path)), 0.2).t[-1] == pytest.approx(0.2)  # within the table: fine
     held = scene(_csv_doc(tmp_path, after="hold")).excitation
-    np.testing.assert_allclose(accel(held, [0.15, 0.3, 100.0]), [[2.0, 1.0]] * 3)
+    np.testing.assert_allclose(accel(held, [0.15, 0.3, 100.0]), [[2.0, 0.0, 1.0, 0.0, 0.0, 0.0]] * 3)
     zero = scene(_csv_doc(tmp_path, after="zero")).excitation
-    np.testing.assert_allclose(accel(zero, [0.15, 0.3]), [[2.0, 1.0], [0.0, 0.0]])
+    np.testing.assert_allclose(accel(zero, [0.15, 0.3]), [[2.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0] * 6])
     assert simulate(scene(_csv_doc(tmp_path, after="hold"))).t[-1] == pytest.approx(0.5)
     with pytest.raises(SceneError) as e:
         scene(_csv_doc(tmp_path, after="repeat"))

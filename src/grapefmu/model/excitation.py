@@ -47,13 +47,16 @@ class Excitation:
     key: str = "excitation"   # the scene key to name when a run goes past defined_until
     orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
     angular_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    may_turn: bool = False  # a face's inputs may turn the rachis, whatever this excitation does
 
     @property
     def turns(self) -> bool:
-        """Whether the rachis ever rotates (an angular velocity at the start or an angular acceleration)."""
+        """Whether the rachis' orientation is ever other than level: it starts turned or turning, the excitation
+        turns it, or a face may (`may_turn`). A run's state carries ω and the orientation only then."""
         a = self.arrays
         rows = a.table[:, 4:7] if a.kind == TABLE else a.par[3:6]
-        return bool(np.any(rows != 0.0) or any(w != 0.0 for w in self.angular_velocity))
+        return bool(self.may_turn or np.any(rows != 0.0) or any(w != 0.0 for w in self.angular_velocity)
+                    or any(c != 0.0 for c in self.orientation[:3]))
 
     def starting(self, orientation=None, angular_velocity=None) -> "Excitation":
         """This excitation from another initial orientation (quaternion x, y, z, w) or angular velocity."""

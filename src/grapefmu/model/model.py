@@ -131,6 +131,7 @@ class ModelArrays(NamedTuple):
     obstacle: np.ndarray
     gravity: float   # m/s²
     n_dof: int       # D: angles in q
+    turning: bool = False  # the rachis may turn: its ω and orientation ride in y (Scene.arrays sets it)
 
 
 @dataclass(frozen=True)
@@ -293,6 +294,23 @@ class Scene:
         why = self.model.refuses_turn(self.excitation)
         if why:
             raise SceneError(*why)
+
+    @cached_property
+    def arrays(self) -> ModelArrays:
+        """The model's arrays for this scene's runs: with `turning` when its rachis may turn."""
+        return self.model.arrays._replace(turning=self.excitation.turns)
+
+    @property
+    def layout(self):
+        """Where each quantity sits in the state of this scene's runs (physics/layout.py)."""
+        from ..physics.layout import layout
+        m = self.model
+        return layout(m.n_berries, m.n_dof, len(m.couplings), self.excitation.turns)
+
+    def free_to_turn(self) -> "Scene":
+        """This scene with a rachis that may turn whatever its excitation does: a face's inputs may turn it."""
+        from dataclasses import replace
+        return self if self.excitation.may_turn else replace(self, excitation=replace(self.excitation, may_turn=True))
 
     @property
     def initial_state(self) -> np.ndarray:

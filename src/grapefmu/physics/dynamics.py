@@ -71,6 +71,9 @@ def rhs(t, t_ref, y, dy, contacts, M, X, inp, W, pairs, n_pairs):
     for a in range(3):
         dy[o_bv + a] = acc[a]
         dy[o_b + a] = y[o_bv + a]
+    if not M.turning:
+        return
+    for a in range(3):
         dy[o_om + a] = acc[3 + a]
     wx, wy, wz = y[o_om], y[o_om + 1], y[o_om + 2]  # q̇ = ½ (ω, 0) ⊗ q, ω in the world frame
     qx, qy, qz, qw = y[o_rot], y[o_rot + 1], y[o_rot + 2], y[o_rot + 3]

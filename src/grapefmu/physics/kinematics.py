@@ -65,6 +65,9 @@ def rachis_frame(y, M):
     """The rachis frame y holds (physics/layout.py): R from the orientation quaternion (normalised here: the
     integrator carries it only to its tolerance), ω turned into the rachis frame, ω_r = Rᵀ ω."""
     o_bv, o_b, o_om, o_rot = model_offsets(M)[:4]
+    if not M.turning:
+        return Frame(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, y[o_b], y[o_b + 1], y[o_b + 2],
+                     y[o_bv], y[o_bv + 1], y[o_bv + 2], 0.0, 0.0, 0.0, 0.0)
     qx, qy, qz, qw = y[o_rot], y[o_rot + 1], y[o_rot + 2], y[o_rot + 3]
     wx, wy, wz = y[o_om], y[o_om + 1], y[o_om + 2]
     if qx == 0.0 and qy == 0.0 and qz == 0.0 and wx == 0.0 and wy == 0.0 and wz == 0.0:
@@ -263,7 +266,7 @@ def _padded(y, M):
     head = model_head.py_func(M)
     out = np.zeros(max(len(y), head))
     out[: len(y)] = y
-    if len(y) < head:
+    if len(y) < head and M.turning:
         out[head - 1] = 1.0  # the orientation quaternion's w
     return out
 

@@ -4,6 +4,10 @@ y = [q (D) | q̇ (D) | base velocity ḃ (3) | base displacement b (3) | base an
      | base orientation (4: the quaternion (x, y, z, w) of R, world from rachis) | hinge dissipation (N)
      | coupling dissipation (C) | contact dissipation (1) | base work (1)]
 
+ω and the orientation are there only when the rachis may turn (`ModelArrays.turning`, from the scene:
+model/excitation.Excitation.turns): a rachis that only translates keeps R = I, and its runs carry (and the
+integrator's error norm averages over) seven components fewer.
+
 D is the number of degrees of freedom: one angle per planar berry, two per spherical one.
 The rachis motion follows the angles so that the head of y a step's dense output is sampled on
 (events, peaks, the broad phase) places every berry in the world frame too (obstacles are fixed there).
@@ -27,6 +31,7 @@ class Layout(NamedTuple):
     n: int
     d: int
     c: int
+    turning: bool
     q: slice
     w: slice
     base_velocity: slice
@@ -41,7 +46,7 @@ class Layout(NamedTuple):
 
 
 @inline
-def offsets(n, d, c):
+def offsets(n, d, c, turning):
     """The first index of each block of y for N berries, D angles and C couplings: (base velocity, base
     displacement, base angular velocity, base orientation, hinge dissipation, coupling dissipation, contact
     dissipation, base work, size). The head that places the berries is y[:hinge dissipation]. The one
@@ -49,23 +54,23 @@ def offsets(n, d, c):
     o_bv = 2 * d
     o_b = o_bv + 3
     o_om = o_b + 3
-    o_rot = o_om + 3
-    o_dh = o_rot + 4
+    o_rot = o_om + 3 if turning else o_om
+    o_dh = o_rot + 4 if turning else o_rot
     o_dc = o_dh + n
     o_contact = o_dc + c
     return o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_contact + 1, o_contact + 2
 
 
-def layout(n: int, d: int, c: int) -> Layout:
-    o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_w, size = offsets.py_func(n, d, c)
-    return Layout(n, d, c, slice(0, d), slice(d, 2 * d), slice(o_bv, o_b), slice(o_b, o_om), slice(o_om, o_rot),
+def layout(n: int, d: int, c: int, turning: bool = False) -> Layout:
+    o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_w, size = offsets.py_func(n, d, c, turning)
+    return Layout(n, d, c, bool(turning), slice(0, d), slice(d, 2 * d), slice(o_bv, o_b), slice(o_b, o_om), slice(o_om, o_rot),
                   slice(o_rot, o_dh), slice(o_dh, o_dc), slice(o_dc, o_contact), o_contact, o_w, size)
 
 
 @inline
 def model_offsets(M):
     """offsets() of a model's arrays (compiled code)."""
-    return offsets(M.berry.shape[0], M.n_dof, M.coupling.shape[0])
+    return offsets(M.berry.shape[0], M.n_dof, M.coupling.shape[0], M.turning)
 
 
 @inline
@@ -80,9 +85,24 @@ def initial(lay: Layout, scene, extra: int = 0) -> np.ndarray:
     rest in translation, in its initial orientation and angular velocity, every energy integral zero."""
     y = np.zeros(lay.size + extra)
     y[: 2 * lay.d] = scene.initial_state
-    y[lay.base_orientation] = scene.excitation.orientation
-    y[lay.base_angular_velocity] = scene.excitation.angular_velocity
+    if lay.turning:
+        y[lay.base_orientation] = scene.excitation.orientation
+        y[lay.base_angular_velocity] = scene.excitation.angular_velocity
     return y
+
+
+#: the rachis' orientation and angular velocity in a layout without them (a rachis that does not turn)
+LEVEL, STILL = np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3)
+
+
+def orientation(lay: Layout, y) -> np.ndarray:
+    """The rachis' orientation quaternions (..., 4) in states y (..., size)."""
+    return y[..., lay.base_orientation] if lay.turning else np.broadcast_to(LEVEL, y.shape[:-1] + (4,))
+
+
+def angular_velocity(lay: Layout, y) -> np.ndarray:
+    """The rachis' angular velocities (..., 3), world frame, in states y (..., size)."""
+    return y[..., lay.base_angular_velocity] if lay.turning else np.broadcast_to(STILL, y.shape[:-1] + (3,))
 
 
 #: the energy integrals that ride along in y, in the order ledger() returns them

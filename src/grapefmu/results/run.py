@@ -14,7 +14,7 @@ import numpy as np
 from ..model.model import Scene
 from ..physics import observe as obs
 from ..physics.damage import detaching, fatigue, pair_bruise_thresholds
-from ..physics.layout import LEDGER_TERMS, Layout, ledger, layout
+from ..physics.layout import LEDGER_TERMS, Layout, angular_velocity, ledger, orientation
 from . import catalogue, trust
 from .impacts import Impacts
 
@@ -42,8 +42,7 @@ class Run:
 
     @property
     def layout(self) -> Layout:
-        m = self.scene.model
-        return layout(m.n_berries, m.n_dof, len(m.couplings))
+        return self.scene.layout
 
     @property
     def angles(self) -> np.ndarray:
@@ -59,11 +58,11 @@ class Run:
 
     @property
     def base_angular_velocity(self) -> np.ndarray:
-        return self.y[:, self.layout.base_angular_velocity]
+        return angular_velocity(self.layout, self.y)
 
     @property
     def base_orientation(self) -> np.ndarray:
-        return self.y[:, self.layout.base_orientation]
+        return orientation(self.layout, self.y)
 
     @property
     def mode(self) -> np.ndarray:
@@ -81,7 +80,7 @@ class Run:
         m = self.scene.model
         out = obs.empty(len(self.t), m.n_berries, m.n_dof, len(m.pairs))
         obs.observe(np.ascontiguousarray(self.y), np.ascontiguousarray(self.contacts), np.ascontiguousarray(self.accel),
-                    m.arrays, out)
+                    self.scene.arrays, out)
         return out
 
     @cached_property

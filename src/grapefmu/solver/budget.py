@@ -18,7 +18,7 @@ def sample_bytes(model) -> int:
     from ..physics.layout import layout
     from .state import recorder
 
-    ny = layout(model.n_berries, model.n_dof, len(model.couplings)).size
+    ny = layout(model.n_berries, model.n_dof, len(model.couplings), turning=True).size  # the larger one
     return sum(a.nbytes for a in recorder(1, ny, len(model.pairs), 0)[:5])
 
 

@@ -16,7 +16,6 @@ import numpy as np
 from ..model.model import ContactPair, Coupling, Model, Scene
 from ..errors import SolverError
 from ..physics.forces import CONTACT
-from ..physics.layout import layout
 from ..results.impacts import Impacts
 from ..results.records import TOTALS, concat
 from ..results.run import Run
@@ -75,7 +74,7 @@ def run_by_group(scene: Scene, simulate_one: Callable[[Scene, float, float], Run
 def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
     """One Run of the whole scene from the runs of its groups (all sampled on the same grid)."""
     m = scene.model
-    lay = layout(m.n_berries, m.n_dof, len(m.couplings))
+    lay = scene.layout
     t = runs[0].t
     n, npair = len(t), len(m.pairs)
     y = np.zeros((n, lay.size))
@@ -99,7 +98,7 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
             y[:, lay.d_coupling.start + coup_index[(members[c.i], members[c.j])]] = run.y[:, sl.d_coupling.start + k]
         y[:, lay.d_contact] += run.y[:, sl.d_contact]
         y[:, lay.work] += run.y[:, sl.work]
-        for block in ("base_velocity", "base", "base_angular_velocity", "base_orientation"):
+        for block in ("base_velocity", "base", "base_angular_velocity", "base_orientation")[: 4 if lay.turning else 2]:
             y[:, getattr(lay, block)] = run.y[:, getattr(sl, block)]
         body = members + list(range(m.n_berries, m.n_berries + len(m.obstacles)))  # group's body -> scene's
         glob = np.array([pair_index[(body[p.i], body[p.j])] for p in run.scene.model.pairs], dtype=int)

@@ -26,7 +26,7 @@ from ..physics.excitation import base_accel, held
 from ..physics.compiled import jit
 from ..physics.forces import CONTACT, pair_force
 from ..physics.kinematics import pair_state, workspace
-from ..physics.layout import initial, layout
+from ..physics.layout import initial
 from ..results.impacts import IMPACT, Impacts
 from ..results.records import TOTALS
 from ..results.run import Run
@@ -47,9 +47,9 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     atol = s.atol if atol is None else atol
     dt_out = s.output_interval if output_interval is None else output_interval
     m = scene.model
-    M = m.arrays
+    M = scene.arrays
     X = scene.excitation.arrays
-    lay = layout(m.n_berries, m.n_dof, len(m.couplings))
+    lay = scene.layout
     npair = len(m.pairs)
     ny = lay.size
     st = np.zeros(npair, dtype=CONTACT)

@@ -84,7 +84,7 @@ def advance(s, dt, held, a, omega_set, omega, max_steps):
             or inp.alpha_y != a[4] or inp.alpha_z != a[5]):
         inp.held, inp.ax, inp.ay, inp.az, inp.alpha_x, inp.alpha_y, inp.alpha_z = held, a[0], a[1], a[2], a[3], a[4], a[5]
         changed = True
-    if omega_set:
+    if omega_set and s.model.turning:  # Solver.advance refuses a non-zero ω for a rachis that does not turn
         y = S.physical.y
         o = model_offsets(s.model)[2]
         for k in range(3):

@@ -21,7 +21,7 @@ from ..physics import observe as obs
 from ..physics.compiled import jit
 from ..physics.excitation import ACCEL_COMPONENTS, INPUT, base_accel
 from ..physics.kinematics import kinematics, workspace
-from ..physics.layout import LEDGER_TERMS, initial, layout, ledger
+from ..physics.layout import LEDGER_TERMS, angular_velocity, initial, ledger, orientation
 from ..results import catalogue
 from ..results.impacts import Impacts
 from ..results.records import concat
@@ -71,8 +71,12 @@ class Solver:
 
     def __init__(self, scene: Scene, *, method: str | None = None, rtol: float | None = None,
                  atol: float | None = None, fixed_step: float | None = None, max_steps: int = 10_000_000,
-                 skin: float | None = None, locate: bool | None = None, t_start: float = 0.0):
+                 skin: float | None = None, locate: bool | None = None, t_start: float = 0.0,
+                 turning: bool = False):
+        """turning: the rachis may be turned by advance()'s inputs (a face: the FMU, the ROS node), whatever the
+        scene's excitation does; otherwise it turns only if the scene turns it (Excitation.turns)."""
         s = scene.solver
+        scene = scene.free_to_turn() if turning else scene
         self.scene = scene
         self.method = method or s.method
         if self.method not in ("event", "paper"):
@@ -84,9 +88,9 @@ class Solver:
         self.fixed_step = fixed_step if fixed_step is not None else s.fixed_step
         self.max_steps = max_steps
         self.model = scene.model
-        self.M = scene.model.arrays
+        self.M = scene.arrays
         self.excitation = scene.excitation.arrays
-        self.layout = layout(self.model.n_berries, self.model.n_dof, len(self.model.couplings))
+        self.layout = scene.layout
         self._plane_normal = self.model.plane_normal(scene.excitation)
         if skin is None:
             skin = SKIN_FRACTION * float(np.mean([b.radius for b in self.model.berries]))
@@ -108,8 +112,8 @@ class Solver:
                                 self._buffers, self._memory, self._backup, now)
         observation, accel, in_contact = now
         self._snapshot = catalogue.Snapshot(self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel,
-                                            y[None, lay.base], y[None, lay.base_angular_velocity],
-                                            y[None, lay.base_orientation], np.zeros((1, len(LEDGER_TERMS))),
+                                            y[None, lay.base], angular_velocity(lay, y[None]),
+                                            orientation(lay, y[None]), np.zeros((1, len(LEDGER_TERMS))),
                                             self.state.book.totals, observation, m.obstacle_pairs)
 
     # --- state -----------------------------------------------------------------------------------
@@ -283,6 +287,9 @@ class Solver:
             omega_set, omega = False, _NO_OMEGA
         else:
             omega_set, omega = True, _angular_velocity(angular_velocity)
+        if not self.layout.turning and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
+            raise SolverError("base_accel, angular_velocity: this solver's rachis does not turn (its scene does "
+                              "not turn it); build it with Solver(scene, turning=True) to drive rotation as an input")
         n = self._plane_normal
         if n is not None and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]) and (
                 off_axis(a[3:], n) or off_axis(omega, n)):
