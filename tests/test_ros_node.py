@@ -35,8 +35,8 @@ from grapefmu.recording.typestore import serialize  # noqa: E402
 from .recordings import decode_everything  # noqa: E402
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-#: ≤ 101: higher domains put DDS ports in Linux's ephemeral range. GRAPEFMU_TEST_DOMAIN fixes it (e.g. 51 to 100, clear
-#: of the random ones, for runs side by side); the replay test takes a domain of its own, REPLAY_DOMAIN
+#: ≤ 101: higher domains put DDS ports in Linux's ephemeral range. GRAPEFMU_TEST_DOMAIN fixes it (e.g. 51 to 100,
+#: clear of the random ones, for runs side by side); the replay test takes a domain of its own, REPLAY_DOMAIN
 DOMAIN = os.environ.get("GRAPEFMU_TEST_DOMAIN") or str(random.randint(1, 50))
 REPLAY_DOMAIN = str(int(DOMAIN) + 50 if int(DOMAIN) <= 50 else int(DOMAIN) + 1)
 DDS = {"ROS_DOMAIN_ID": DOMAIN, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
@@ -159,7 +159,7 @@ def test_lockstep_answers_at_input_stamps_and_events_match_the_core(ros, tmp_pat
         stamps = {round(stamp_seconds(s.header.stamp.sec, s.header.stamp.nanosec), 9) for s in ctl.states}
         assert {round(t, 9) for t, _ in rows} <= stamps
         # the same held inputs through the core directly
-        solver = Solver(load_scene(default_scene_path()))
+        solver = Solver(load_scene(default_scene_path()), turning=True)  # as the node builds it
         onsets = []
         for (_, a), (t1, _) in zip(rows, rows[1:]):
             solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, a)  # as the node computes it
@@ -357,7 +357,7 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
         ctl.wait_for(lambda: any(s.time == pytest.approx(rows[-1][0], abs=1e-12) for s in summaries))
         ctl.spin(0.5)
         ctl.close()
-    solver = Solver(load_scene(scene))
+    solver = Solver(load_scene(scene), turning=True)
     for (_, a), (t1, _) in zip(rows, rows[1:]):
         solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, a)
     t_last = rows[-1][0]

@@ -331,7 +331,9 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
                 compare(key, *recorded[key], run.angles[k], run.angular_velocities[k])
     else:
         from ..solver.solver import Solver
-        solver = Solver(scene)
+        # the node's solver may be turned by its inputs (recordings before it could say "turning" had no turns)
+        turning = rec.metadata.get("turning") == "true"
+        solver = Solver(scene, turning=turning)
         applied, at = rec.topics.get("rachis/accel_applied", []), rec.positions.get("rachis/accel_applied", [])
         # each applied interval ends at a simulated time: `sim_time`, logged at the same stamp (its header is
         # the ROS clock), or the stamp itself in recordings made before the node stamped with its clock
@@ -344,7 +346,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         for k, (ns, m) in enumerate(applied):
             t_end = seconds(sim.get(ns, ns))
             if t_end < solver.t:  # the node was reset
-                solver = Solver(scene)
+                solver = Solver(scene, turning=turning)
             a, w = m.accel.linear, m.accel.angular
             set_omega = omega.get(k)
             solver.advance(t_end - solver.t, (a.x, a.y, a.z, w.x, w.y, w.z),
