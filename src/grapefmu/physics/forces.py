@@ -107,10 +107,14 @@ def forces(acc, fr, contacts, M, W, pairs, n_pairs):
     them past (§7: F n·(ḃ + ω × p) per berry–obstacle contact)."""
     g = M.gravity
     berry, kin = M.berry, W.berry
-    ax, ay, az = to_rachis(fr, acc[0], acc[1], acc[2])
-    gx, gy, gz = to_rachis(fr, 0.0, 0.0, -g)
-    ex, ey, ez = gx - ax, gy - ay, gz + g - az  # the uniform field g⃗ − a, less the rachis-frame gravity (0, 0, −g)
-    alx, aly, alz = to_rachis(fr, acc[3], acc[4], acc[5])
+    if fr.turned == 0.0:  # R = I, ω = 0: the fields of a translating rachis (and α, which turns it from rest)
+        ex, ey, ez = -acc[0], -acc[1], -acc[2]
+        alx, aly, alz = acc[3], acc[4], acc[5]
+    else:
+        ax, ay, az = to_rachis(fr, acc[0], acc[1], acc[2])
+        gx, gy, gz = to_rachis(fr, 0.0, 0.0, -g)
+        ex, ey, ez = gx - ax, gy - ay, gz + g - az  # the field g⃗ − a, less the rachis-frame gravity (0, 0, −g)
+        alx, aly, alz = to_rachis(fr, acc[3], acc[4], acc[5])
     ox, oy, oz = fr.ox, fr.oy, fr.oz
     spinning = ox != 0.0 or oy != 0.0 or oz != 0.0 or alx != 0.0 or aly != 0.0 or alz != 0.0
     work = 0.0
