@@ -78,10 +78,22 @@ class Controller:
                 raise TimeoutError("the node did not answer in time")
             rclpy.spin_once(self.node, timeout_sec=0.01)
 
-    def connect(self):
+    def connect(self, lockstep=True):
+        """Wait until this controller and the node see each other; in lockstep mode, until the node answers an
+        input. Its inputs are best-effort readers, which may match this writer later than this writer matches
+        them, and drop what comes before: a probe, zero acceleration at t = 0 (what the node holds from the
+        start), is sent until answered. Two answers at t = 0 mean one came: the node's initial state is one."""
         self.wait_for(lambda: self.pub.get_subscription_count() > 0 and
                       self.node.count_publishers("joint_states") > 0 and self.reset.service_is_ready())
         self.spin(0.5)
+        if lockstep:
+            def probe() -> bool:
+                self.send(0.0, (0.0,) * 6)
+                self.spin(0.1)
+                return self.answers[0] >= 2
+
+            self.wait_for(probe)
+            self.spin(0.3)  # the answers to probes still on their way
 
     def _state(self, m):
         self.states.append(m)
@@ -228,7 +240,7 @@ def test_bad_inputs_are_rejected_and_the_node_survives(ros, tmp_path):
 def test_realtime_mode_follows_the_wall_clock_and_sigterm_leaves_a_complete_file(ros, tmp_path):
     with sim_node(tmp_path, mode="realtime") as (proc, rec):
         ctl = Controller("rt")
-        ctl.connect()
+        ctl.connect(lockstep=False)
         ctl.spin(0.5)
         t0, w0 = ctl.states[-1], time.monotonic()
         ctl.spin(2.0)
@@ -245,7 +257,7 @@ def test_realtime_mode_follows_the_wall_clock_and_sigterm_leaves_a_complete_file
 def test_killed_node_leaves_a_readable_file_up_to_its_last_chunk(ros, tmp_path):
     with sim_node(tmp_path, mode="realtime") as (proc, rec):
         ctl = Controller("kill")
-        ctl.connect()
+        ctl.connect(lockstep=False)
         ctl.spin(2.0)
         proc.kill()
         proc.wait()
