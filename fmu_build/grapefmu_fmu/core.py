@@ -24,7 +24,7 @@ from grapefmu.physics.excitation import ACCEL_COMPONENTS, accel
 from grapefmu.results.catalogue import CHANNELS
 from grapefmu.scenefile import parse_scene, scene_from_dict
 from grapefmu.solver import state as solver_state
-from grapefmu.solver.solver import MAX_ACCEL, MAX_ANGULAR_VELOCITY
+from grapefmu.model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 
 from .variables import ORIENTATION, OUTPUT_SETS, Var, default_outputs, variables
 
@@ -38,7 +38,7 @@ OMEGA_INPUTS = tuple(c.name for c in _INPUT_CHANNELS if c.topic == "rachis/twist
 INPUTS = ACCEL_INPUTS + OMEGA_INPUTS
 assert len(ACCEL_INPUTS) == len(ACCEL_COMPONENTS) and len(OMEGA_INPUTS) == 3 and len(INPUTS) == len(_INPUT_CHANNELS)
 #: what each input is, and the largest magnitude it takes: the solver's own bounds
-_KIND = {"m/s2": ("an acceleration", MAX_ACCEL, "m/s²"), "rad/s2": ("an angular acceleration", MAX_ACCEL, "rad/s²"),
+_KIND = {"m/s2": ("an acceleration", MAX_ACCEL, "m/s²"), "rad/s2": ("an angular acceleration", MAX_ANGULAR_ACCEL, "rad/s²"),
          "rad/s": ("an angular velocity", MAX_ANGULAR_VELOCITY, "rad/s")}
 INPUT_KIND = {c.name: _KIND[c.unit] for c in _INPUT_CHANNELS}
 INPUT_BOUNDS = {name: kind[1] for name, kind in INPUT_KIND.items()}

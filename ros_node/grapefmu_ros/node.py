@@ -29,7 +29,7 @@ from std_srvs.srv import SetBool, Trigger
 from grapefmu import GrapefmuError, Solver, load_scene
 from grapefmu.model.model import off_axis
 from grapefmu.scenefile import default_scene_path
-from grapefmu.solver.solver import MAX_ACCEL, MAX_ANGULAR_VELOCITY
+from grapefmu.model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from grapefmu.solver.warmup import notice
 from grapefmu.recording import messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
@@ -59,8 +59,8 @@ PARAMETERS = [
     ("real_time_factor", 1.0, "Simulated seconds per wall second in real-time mode", (0.01, 100), False),
     ("max_accel", MAX_ACCEL, "Inputs whose linear acceleration exceeds this magnitude (m/s²) are rejected (at most "
      "the solver's own bound)", (0, MAX_ACCEL), False),
-    ("max_angular_accel", MAX_ACCEL, "Inputs whose angular acceleration exceeds this magnitude (rad/s²) are rejected "
-     "(at most the solver's own bound)", (0, MAX_ACCEL), False),
+    ("max_angular_accel", MAX_ANGULAR_ACCEL, "Inputs whose angular acceleration exceeds this magnitude (rad/s²) are "
+     "rejected (at most the solver's own bound)", (0, MAX_ANGULAR_ACCEL), False),
     ("marker_rate_hz", 30.0, "MarkerArray rate, Hz (0: none)", (0, 1000), False),
     ("tf_rate_hz", 100.0, "/tf rate, Hz (TF listeners interpolate between transforms)", (1, 10000), False),
     ("pose_filter_hz", 20.0, "Low-pass cutoff for accelerations differentiated from rachis/pose, rachis/twist or "

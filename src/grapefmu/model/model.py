@@ -305,13 +305,6 @@ class Scene:
         """The model's arrays for this scene's runs: with `turning` when its rachis may turn."""
         return self.model.arrays._replace(turning=self.excitation.turns)
 
-    @property
-    def layout(self):
-        """Where each quantity sits in the state of this scene's runs (physics/layout.py)."""
-        from ..physics.layout import layout
-        m = self.model
-        return layout(m.n_berries, m.n_dof, len(m.couplings), self.excitation.turns)
-
     def free_to_turn(self) -> "Scene":
         """This scene with a rachis that may turn whatever its excitation does: a face's inputs may turn it."""
         from dataclasses import replace

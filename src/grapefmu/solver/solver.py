@@ -16,12 +16,13 @@ import numpy as np
 
 from ..errors import SolverError
 from ..model.contact import HC_MIN_APPROACH_SPEED, Law
+from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from ..model.model import Scene, off_axis
 from ..physics import observe as obs
 from ..physics.compiled import jit
 from ..physics.excitation import ACCEL_COMPONENTS, INPUT, base_accel
 from ..physics.kinematics import kinematics, workspace
-from ..physics.layout import LEDGER_TERMS, angular_velocity, initial, ledger, orientation
+from ..physics.layout import LEDGER_TERMS, angular_velocity, initial, ledger, layout_of, orientation
 from ..results import catalogue
 from ..results.impacts import Impacts
 from ..results.records import concat
@@ -36,8 +37,6 @@ from .tableau import BOGACKI_SHAMPINE, DOPRI5
 #: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
 #: wider means fewer rebuilds but more near pairs to watch on every step
 SKIN_FRACTION = 0.5
-#: the largest base acceleration any face accepts, m/s² (about 100 g: beyond any gripper, so a unit mistake)
-MAX_ACCEL = 1e3
 
 NO_IMPACTS = Impacts.from_records(np.zeros(0, dtype=st.IMPACT))
 
@@ -90,7 +89,7 @@ class Solver:
         self.model = scene.model
         self.M = scene.arrays
         self.excitation = scene.excitation.arrays
-        self.layout = scene.layout
+        self.layout = layout_of(scene)
         n = self.model.plane_normal(scene.excitation)
         self._plane_normal = None if n is None else tuple(float(c) for c in n)  # floats: off_axis without numpy
         if skin is None:
@@ -407,8 +406,6 @@ def _step_size(dt) -> float:
 
 _NO_ACCEL = (0.0,) * 6
 _NO_OMEGA = (0.0,) * 3
-#: the largest angular velocity any face accepts, rad/s (about 1600 rpm: beyond any robot wrist, so a unit mistake)
-MAX_ANGULAR_VELOCITY = 1e2
 
 
 def _held_accel(base_accel) -> tuple[float, ...]:
@@ -423,8 +420,9 @@ def _held_accel(base_accel) -> tuple[float, ...]:
         raise SolverError(f"base_accel: expected six numbers ({', '.join(ACCEL_COMPONENTS)}) in m/s² and rad/s², or "
                           f"the planar pair (a_x, a_z), got {base_accel!r}")
     for name, v in zip(ACCEL_COMPONENTS, a):
-        if not (math.isfinite(v) and abs(v) <= MAX_ACCEL):
-            raise SolverError(f"base_accel: {name} = {v!r}; expected a finite value within ±{MAX_ACCEL:g} "
+        bound = MAX_ACCEL if name in ACCEL_COMPONENTS[:3] else MAX_ANGULAR_ACCEL
+        if not (math.isfinite(v) and abs(v) <= bound):
+            raise SolverError(f"base_accel: {name} = {v!r}; expected a finite value within ±{bound:g} "
                               f"{'m/s²' if name[0] == 'a' and len(name) == 2 else 'rad/s²'}")
     return a
 
