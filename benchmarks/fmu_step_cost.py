@@ -1,7 +1,8 @@
 """Cost per 1 ms communication step: the raw core, the FMU through fmpy, libcosimpy and ecospy, and a
 do-nothing pythonfmu FMU with the same variables through the same importers (the importer's and
-pythonfmu's own overhead). Wrapper overhead = FMU − null FMU − raw core. Each step sets both inputs, steps
-and reads every Real output ("fmpy-angles": only the two angles a controller would read).
+pythonfmu's own overhead). Wrapper overhead = FMU − null FMU − raw core. Each step sets every input (the
+rachis' acceleration, angular acceleration and angular velocity: nine), steps and reads every Real output
+("fmpy-angles": only the two angles a controller would read).
 Run: .venv/bin/python benchmarks/fmu_step_cost.py   (builds into a temporary directory)."""
 from __future__ import annotations
 
@@ -55,6 +56,8 @@ WORKER = textwrap.dedent('''
     md = read_model_description(path)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     outs = [v.valueReference for v in md.modelVariables if v.causality == "output" and v.type == "Real"]
+    ins = [v.valueReference for v in md.modelVariables if v.causality == "input"]
+    in_names = [v.name for v in md.modelVariables if v.causality == "input"]
     if importer.endswith("-angles"):  # a master that reads only what its controller needs
         importer, outs = importer.split("-")[0], [vr["angle_left"], vr["angle_right"]]
     acc = np.sin(np.arange(n) * 0.01) * 3.0
@@ -68,7 +71,7 @@ WORKER = textwrap.dedent('''
             t = dt
             w = time.perf_counter()
             for k in range(n):
-                f.setReal([vr["base_ax"], vr["base_az"]], [acc[k], 0.0])
+                f.setReal(ins, [acc[k]] + [0.0] * (len(ins) - 1))
                 f.doStep(currentCommunicationPoint=t, communicationStepSize=dt)
                 f.getReal(outs)
                 t += dt
@@ -84,8 +87,8 @@ WORKER = textwrap.dedent('''
             names = [f"a{rep}::{v.name}" for v in md.modelVariables if v.valueReference in outs and v.causality == "output" and v.type == "Real"]
             w = time.perf_counter()
             for k in range(n):
-                sim.set_real(f"a{rep}::base_ax", acc[k])
-                sim.set_real(f"a{rep}::base_az", 0.0)
+                for j, name in enumerate(in_names):
+                    sim.set_real(f"a{rep}::{name}", acc[k] if j == 0 else 0.0)
                 sim.step()
                 [sim.get_real(x) for x in names]
             best = min(best, (time.perf_counter() - w) / n)
@@ -102,7 +105,7 @@ WORKER = textwrap.dedent('''
             ex.step()
             w = time.perf_counter()
             for k in range(n):
-                m.slave_real_values(a, [vr["base_ax"], vr["base_az"]], [acc[k], 0.0])
+                m.slave_real_values(a, ins, [acc[k]] + [0.0] * (len(ins) - 1))
                 ex.step()
                 o.last_real_values(a, outs)
             best = min(best, (time.perf_counter() - w) / n)
@@ -117,11 +120,12 @@ def core_cost() -> float:
     from grapefmu.scenefile import default_scene_path
     acc = np.sin(np.arange(N_STEPS) * 0.01) * 3.0
     best = 1e9
+    still = (0.0, 0.0, 0.0)
     for _ in range(3):
-        s = Solver(load_scene(default_scene_path()))
+        s = Solver(load_scene(default_scene_path()), turning=True)  # the FMU's: its inputs may turn the rachis
         w = time.perf_counter()
         for k in range(N_STEPS):
-            s.advance(DT, (acc[k], 0.0))
+            s.advance(DT, (float(acc[k]), 0.0, 0.0, 0.0, 0.0, 0.0), still)  # what the FMU's step calls
         best = min(best, (time.perf_counter() - w) / N_STEPS)
     return best
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from grapefmu import simulate
-from grapefmu.physics.excitation import accel
+from grapefmu.physics.excitation import ACCEL_COMPONENTS, accel
 from grapefmu.scenefile import default_scene_path
 from grapefmu.model.excitation import pick_and_place
 from grapefmu.scenefile import scene_from_dict
@@ -29,9 +29,11 @@ def run(*args, timeout=600, env=None):
     return r
 
 
-def drive(*args, env=None):
-    out = run("-m", "tests.fmu_driver", *map(str, args), env=env).stdout
-    return json.loads(out.split("JSON:", 1)[1])
+def drive(*args, env=None, log=False):
+    """The driver's JSON (and with log=True what the FMU logged)."""
+    r = run("-m", "tests.fmu_driver", *map(str, args), env=env)
+    head, tail = r.stdout.split("JSON:", 1)
+    return (json.loads(tail), head + r.stderr) if log else json.loads(tail)
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +44,8 @@ def fmus(tmp_path_factory):
     # a pick-and-place acceleration, sampled every 10 ms and held (what a controller sends)
     t = np.round(np.arange(0, STOP + 1e-9, 1e-2), 10)
     ex = pick_and_place([((0.0, 0.1), 0.3), ((0.3, 0.0), 0.5), ((0.0, -0.1), 0.3)], start=0.05)
-    np.savetxt(d / "signal.csv", np.column_stack([t, accel(ex, t)]), delimiter=",", header="time,ax,az", comments="")
+    np.savetxt(d / "signal.csv", np.column_stack([t, accel(ex, t)]), delimiter=",",
+               header=",".join(["time", *ACCEL_COMPONENTS]), comments="")
     return d
 
 
@@ -165,12 +168,25 @@ def test_two_instances_in_one_process_are_independent(fmus):
 
 
 def test_bad_input_is_refused_not_fatal_and_leaves_the_state(fmus):
-    r = drive("bad", fmus / "default2.fmu")
-    for label in ("nan input", "inf input", "huge input", "zero step", "negative step", "bad parameter"):
+    """Every input is checked when it is set, against the solver's bounds; the default scene is planar, so the
+    rachis may turn about y only: its x and z angular inputs and an initial roll are refused, saying why."""
+    r, log = drive("bad", fmus / "default2.fmu", log=True)
+    parameters = ("bad parameter", "bad orientation", "out-of-plane orientation")
+    for label in ("nan input", "inf input", "huge input", "nan angular velocity", "huge angular velocity",
+                  "huge angular acceleration", "out-of-plane angular velocity", "out-of-plane angular acceleration",
+                  "zero step", "negative step", *parameters):
         assert "status 3 (error)" in r[label], (label, r[label])
-        if label != "bad parameter":
-            assert r[label + " unchanged"]
+        if label not in parameters:
+            assert r[label + " unchanged"], label
     assert r["recovers"]
+    for message in ("input base_omega_y = 1000.0: expected an angular velocity within ±100 rad/s",
+                    "input base_alpha_y = 1000000.0: expected an angular acceleration within ±10000 rad/s²",
+                    "input base_omega_x = 0.5: this scene has planar berries",
+                    "input base_alpha_z = -2.0: this scene has planar berries",
+                    "rachis_pitch: expected a number in [-6.28319, 6.28319] rad, got 7.0",
+                    "rachis_roll = 0.2, rachis_pitch = 0.0, rachis_yaw = 0.0: the initial orientation tilts",
+                    "for planar berries rachis_roll must be 0"):
+        assert message in log, message
 
 
 def test_fmi3_refuses_bad_input_with_fmi3_error(fmus):

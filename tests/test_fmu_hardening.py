@@ -33,7 +33,8 @@ def fmus(tmp_path_factory):
 
 
 values = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, 1.0, -3.0, 999.0, 1e3 + 1]))
-targets = st.sampled_from(["base_ax", "base_az", "angle_left", "gravity", "contact_law", "mass_left", 99999, 2 ** 31])
+targets = st.sampled_from(["base_ax", "base_az", "base_alpha_y", "base_omega_y", "base_omega_x", "base_alpha_z",
+                           "angle_left", "gravity", "contact_law", "mass_left", "rachis_pitch", 99999, 2 ** 31])
 ops = st.one_of(
     st.tuples(st.just("set"), targets, values),
     st.tuples(st.just("get"), st.sampled_from([0, 3, 99999, 2 ** 32 - 1])),
@@ -76,7 +77,7 @@ def test_hostile_call_sequences_never_crash_and_refusals_change_nothing(fmus, tm
 
 
 def reference_angles(stop, dt, accel):
-    solver = Solver(load_scene(ROOT / "scenes" / "default.toml"))
+    solver = Solver(load_scene(ROOT / "scenes" / "default.toml"), turning=True)  # as the FMU's: its inputs may turn
     out = []
     for _ in range(round(stop / dt)):
         solver.advance(dt, accel)

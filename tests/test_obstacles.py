@@ -12,7 +12,7 @@ from grapefmu import GrapefmuError, Solver, simulate
 from grapefmu.cluster import ClusterSpec, cluster_scene
 
 from .conftest import dual, scene
-from .test_ros_node import QOS, Controller, drive, ros, sim_node  # noqa: F401 - ros: the module's rclpy fixture
+from .test_ros_node import QOS, Controller, along_x, drive, ros, sim_node  # noqa: F401 - ros: the rclpy fixture
 
 FLOOR = {"name": "floor", "point": [0.0, 0.0, -0.05], "normal": [0.0, 0.0, 1.0], "law": "hunt-crossley",
          "stiffness": 2e4, "restitution": 0.3, "bruise_force": 0.25}
@@ -133,7 +133,7 @@ def test_the_fmu_reports_obstacle_totals_that_match_the_core(tmp_path):
     from pathlib import Path
 
     from grapefmu.model.excitation import pick_and_place
-    from grapefmu.physics.excitation import accel
+    from grapefmu.physics.excitation import ACCEL_COMPONENTS, accel
     from grapefmu.scenefile.toml_out import dumps
 
     root = Path(__file__).resolve().parents[1]
@@ -141,8 +141,8 @@ def test_the_fmu_reports_obstacle_totals_that_match_the_core(tmp_path):
     (tmp_path / "setdown.toml").write_text(dumps(doc))
     t = np.round(np.arange(0, 1.0 + 1e-9, 1e-2), 10)
     ex = pick_and_place([((0.05, -0.012), 0.4)])
-    np.savetxt(tmp_path / "signal.csv", np.column_stack([t, accel(ex, t)]), delimiter=",", header="time,ax,az",
-               comments="")
+    np.savetxt(tmp_path / "signal.csv", np.column_stack([t, accel(ex, t)]), delimiter=",",
+               header=",".join(["time", *ACCEL_COMPONENTS]), comments="")
     subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", str(tmp_path / "setdown.toml"), "-o",
                     str(tmp_path / "setdown.fmu")], check=True, capture_output=True, cwd=root)
     names = ["angle_left", "angle_right", "contact_force_left_floor", "contact_force_right_floor",
@@ -198,7 +198,7 @@ def test_the_ros_node_names_and_draws_obstacles(ros, tmp_path):
 
     doc = {k: v for k, v in CASES["finger pad on the gripper"].items() if k != "excitation"}
     (tmp_path / "pad.toml").write_text(dumps(doc))
-    rows = [(k * 0.005, float(8.0 * np.sin(2 * np.pi * 4 * k * 0.005))) for k in range(121)]
+    rows = [(k * 0.005, along_x(8.0 * np.sin(2 * np.pi * 4 * k * 0.005))) for k in range(121)]
     with sim_node(tmp_path, record=False, extra=["-p", f"scene:={tmp_path / 'pad.toml'}",
                                                  "-p", "marker_rate_hz:=50.0"]) as (proc, _):
         ctl = Controller("obstacle_listener")
@@ -210,9 +210,9 @@ def test_the_ros_node_names_and_draws_obstacles(ros, tmp_path):
         ctl.spin(0.5)
         ctl.close()
     sc = load_scene(tmp_path / "pad.toml")
-    solver = Solver(sc)
+    solver = Solver(sc, turning=True)  # as the node builds it
     for (_, a), (t1, _) in zip(rows, rows[1:]):
-        solver.advance(t1 - solver.t, (a, 0.0))
+        solver.advance(t1 - solver.t, a)
     np.testing.assert_allclose(list(ctl.state_at(rows[-1][0]).position), solver.angles, atol=1e-9)
     assert {c.body_b for m in contacts for c in m.contacts} >= {"finger"}
     pads = [x for m in markers for x in m.markers if x.ns == "obstacles"]

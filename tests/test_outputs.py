@@ -71,6 +71,40 @@ def test_mcap_reads_back_in_rosbags_and_mcap_ros2(run, tmp_path):
     assert counts["joint_states"] == counts["pedicel_tension"] == counts["summary"] == len(run.t)
 
 
+def test_a_turning_run_draws_its_markers_and_frames_where_its_berries_are(tmp_path):
+    """A run whose rachis turns: every sample's markers and TF (world → rachis → berry) put each berry at its own
+    world position x = b + R p (the markers once took every sample's orientation from the first)."""
+    from rosbags.highlevel import AnyReader
+    from scipy.spatial.transform import Rotation
+
+    from grapefmu.recording.typestore import TYPESTORE
+    from grapefmu.results import catalogue
+
+    doc = dual(left={"kind": "spherical", "angle": [-0.6, 0.2]}, right={"kind": "spherical", "angle": [0.6, -0.1]},
+               excitation={"kind": "sine", "amplitude": [2.0, 1.0, -1.5], "angular_amplitude": [3.0, -2.0, 4.0],
+                           "frequency": 3.0, "orientation": [0.1, -0.2, 0.3], "angular_velocity": [0.5, -0.4, 0.8]})
+    run = simulate(scene(doc), 0.2)
+    write_run(run, tmp_path / "turn.mcap")
+    snap = run.snapshot()
+    world = {int(round(t * 1e9)): x for t, x in zip(run.t, catalogue.world(snap, snap.observation.position))}
+    checked = 0
+    with AnyReader([tmp_path / "turn.mcap"], default_typestore=TYPESTORE) as reader:
+        for c, ns, raw in reader.messages():
+            m = reader.deserialize(raw, c.msgtype)
+            if c.topic == "/tf":
+                tr = {x.child_frame_id: x.transform for x in m.transforms}
+                b, q = tr["grape_cluster/rachis"].translation, tr["grape_cluster/rachis"].rotation
+                for i, name in enumerate(run.scene.model.names):
+                    p = tr[f"grape_cluster/{name}"].translation
+                    x = Rotation.from_quat([q.x, q.y, q.z, q.w]).apply([p.x, p.y, p.z]) + [b.x, b.y, b.z]
+                    np.testing.assert_allclose(x, world[ns][i], atol=1e-12)
+            elif c.topic.endswith("/markers"):
+                spheres = [x.pose.position for x in m.markers if x.ns == "berries"]
+                np.testing.assert_allclose([[s.x, s.y, s.z] for s in spheres], world[ns], atol=1e-12)
+                checked += 1
+    assert checked > 5 and np.ptp(run.base_orientation, axis=0).max() > 0.05
+
+
 def test_main_command_writes_plot_and_mcap(tmp_path):
     r = subprocess.run([sys.executable, "-m", "grapefmu", "simulate", "--plot", str(tmp_path / "d.png"),
                         "--out", str(tmp_path / "d.mcap")], capture_output=True, text=True)

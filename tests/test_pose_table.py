@@ -1,7 +1,7 @@
 """Pose tables (issue 13): the gripper's recorded poses as the rachis motion. The rachis follows an analytic
 motion sampled at 100 Hz to the spline's error; the same table drives simulate, the FMU and the ROS node in
-lockstep (fed the table's acceleration, held over each step) to the same trajectory; bad tables are refused
-naming the row and column."""
+lockstep (fed the table's acceleration, held over each step) to the same trajectory, also while it turns; bad
+tables are refused naming the row and column."""
 from __future__ import annotations
 
 import json
@@ -15,10 +15,10 @@ import pytest
 
 from grapefmu import GrapefmuError, simulate
 from grapefmu.model.excitation import read_pose_table
-from grapefmu.physics.excitation import accel
+from grapefmu.physics.excitation import ACCEL_COMPONENTS, accel
 
 from .conftest import dual, scene
-from .test_ros_node import Controller, ros, sim_node  # noqa: F401 - ros: the module's rclpy fixture
+from .test_ros_node import QOS, Controller, drive, ros, sim_node  # noqa: F401 - ros: the module's rclpy fixture
 
 ROOT = Path(__file__).resolve().parents[1]
 T, DX, DZ = 0.5, 0.06, -0.03  # s, m: one rest-to-rest move
@@ -69,8 +69,8 @@ def test_one_table_gives_one_trajectory_through_simulate_the_fmu_and_the_ros_nod
     dt, stop = 5e-3, 0.6
     grid = np.round(np.arange(0.0, stop - 1e-9, dt), 9)
     held = accel(ex, grid)  # the table's acceleration, held over each step
-    np.savetxt(tmp_path / "held.csv", np.column_stack([grid, held]), delimiter=",", header="time,ax,az",
-               comments="")
+    np.savetxt(tmp_path / "held.csv", np.column_stack([grid, held]), delimiter=",",
+               header=",".join(["time", *ACCEL_COMPONENTS]), comments="")
     plain = {k: v for k, v in table_scene(path, stop).items() if k != "excitation"}
     (tmp_path / "plain.toml").write_text(dumps(plain))
     subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", str(tmp_path / "plain.toml"), "-o",
@@ -85,7 +85,7 @@ def test_one_table_gives_one_trajectory_through_simulate_the_fmu_and_the_ros_nod
         ctl.connect()
         node = []
         for k, tk in enumerate([*grid, stop]):
-            ctl.send(tk, *(held[k] if k < len(grid) else (0.0, 0.0)))  # advance to tk, then hold the next value
+            ctl.send(tk, held[k] if k < len(grid) else np.zeros(6))  # advance to tk, then hold the next value
             ctl.wait_for(lambda tk=tk: ctl.state_at(tk) is not None)
             if k:
                 node.append(list(ctl.state_at(tk).position))
@@ -150,11 +150,12 @@ def test_an_fmu_is_not_built_from_a_pose_table_scene(tmp_path):
     assert not (tmp_path / "x.fmu").exists()
 
 
-def turning_table(path: Path, hz: float, rpy, move=(DX, 0.02, DZ)) -> Path:
-    """A minimum-jerk move that turns by the fixed-axis angles rpy (rad) on the way, sampled at hz."""
+def turning_table(path: Path, hz: float, rpy, move=(DX, 0.02, DZ), start=(0.0, 0.0, 0.0)) -> Path:
+    """A minimum-jerk move that turns by the fixed-axis angles rpy (rad) on the way from the angles `start`,
+    sampled at hz."""
     t = np.arange(0.0, T + 1e-9, 1.0 / hz)
     u = minimum_jerk(t)[0][:, None] / DX
-    np.savetxt(path, np.column_stack([t, u * np.array(move), u * np.array(rpy)]), delimiter=",",
+    np.savetxt(path, np.column_stack([t, u * np.array(move), np.array(start) + u * np.array(rpy)]), delimiter=",",
                header="time,x,y,z,roll,pitch,yaw", comments="")
     return path
 
@@ -193,3 +194,99 @@ def test_a_planar_scene_refuses_a_table_that_rolls(tmp_path):
     with pytest.raises(GrapefmuError) as err:
         scene(table_scene(path))
     assert "excitation.file" in str(err.value) and "y axis" in str(err.value)
+
+
+def test_a_turning_table_gives_one_trajectory_through_simulate_and_the_fmu(tmp_path):
+    """A spherical cluster on a gripper that moves and turns about all three axes from a tilted start: simulate
+    follows the table; the FMU, started at the table's first orientation by its parameters (rachis_roll, _pitch,
+    _yaw) and fed the table's derivatives at each step's start ((a, α) held, ω from simulate's run of the table),
+    follows it to what the hold allows: the difference halves when the step halves (2 ms → 1 ms) and nothing
+    remains beside that first-order term (fmu_driver.assert_hold_error)."""
+    from grapefmu.scenefile.toml_out import dumps
+
+    from .fmu_driver import assert_hold_error, fed_from, named_outputs
+
+    start, stop = (0.2, -0.3, 0.6), 0.6
+    doc = spherical_table_scene(turning_table(tmp_path / "poses.csv", 100, (0.3, 0.5, 0.4), start=start))
+    for b, x in zip(doc["berries"], (-0.1, 0.1)):
+        b["hinge"] = [x, 0.0, 0.0]  # apart: no impact amplifies the hold's difference
+    run = simulate(scene(doc), stop, output_interval=1e-3)
+    assert np.abs(run.base_angular_velocity).max() > 1.0  # rad/s: it turns
+    plain = {k: v for k, v in doc.items() if k != "excitation"}  # the FMU carries no table
+    (tmp_path / "plain.toml").write_text(dumps(plain))
+    subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", str(tmp_path / "plain.toml"), "-o",
+                    str(tmp_path / "plain.fmu")], check=True, capture_output=True, cwd=ROOT)
+    names = [f"angle_{b}_{c}" for b in "ab" for c in ("swing", "tilt")]
+    params = dict(zip(("rachis_roll", "rachis_pitch", "rachis_yaw"), start))
+    differences = {}
+    for dt in (2e-3, 1e-3):
+        got = named_outputs(tmp_path / "plain.fmu", fed_from(run.scene.excitation, run, dt, stop), stop, dt, names,
+                            tmp_path, params)
+        differences[dt] = got[:, 1:] - run.angles[np.rint(got[:, 0] / 1e-3).astype(int)]
+    assert_hold_error(differences)
+    assert np.abs(run.angles - run.angles[0]).max() > 0.05  # rad: the berries swung
+
+
+def test_a_turning_table_gives_one_trajectory_through_simulate_and_the_ros_node(ros, tmp_path):
+    """The 6-DoF node in lockstep: a table that carries the cluster and turns it about a moving axis (roll, pitch
+    and yaw together) drives simulate (its splines) and the node. Every 5 ms the node gets the table's (a, α) held
+    (rachis/accel) and the rachis' angular velocity at that instant (rachis/twist, set at the step's start, as an
+    FMU's base_omega inputs). The node equals a Solver.advance loop on the same held inputs bit for bit (impacts
+    included), turns its TF frame with the table, and differs from simulate by the hold's error alone: the
+    loop's error halves when the step does (first order), so the tolerance is that error, measured."""
+    from tf2_msgs.msg import TFMessage
+
+    from grapefmu import Solver
+    from grapefmu.recording.stamps import stamp_seconds, to_ns
+    from grapefmu.scenefile.toml_out import dumps
+    from scipy.spatial.transform import Rotation
+
+    path = turning_table(tmp_path / "turn.csv", 100, (0.3, 0.5, 0.4))
+    doc = spherical_table_scene(path)
+    ex = read_pose_table(path, "excitation.file")
+    stop, fine = 0.6, 2.5e-3
+    exact = simulate(scene(doc), stop, output_interval=fine)
+    assert exact.collision_count > 0 and np.ptp(exact.base_angular_velocity, axis=0).min() > 0.5  # turns every way
+    plain = {k: v for k, v in doc.items() if k != "excitation"}  # starts where the table does: at rest, unturned
+    (tmp_path / "plain.toml").write_text(dumps(plain))
+
+    def held_inputs(dt):
+        """(t, (a, α) of the table at t, ω at t) for every step start: what a sampled controller sends."""
+        grid = np.round(np.arange(0.0, stop - 1e-9, dt), 9)
+        omega = exact.base_angular_velocity[np.rint(grid / fine).astype(int)]
+        return [(t, tuple(map(float, a)), tuple(map(float, w))) for t, a, w in zip(grid, accel(ex, grid), omega)]
+
+    def held_loop(rows):
+        """The same held inputs straight into Solver.advance, each step ending where the next row starts."""
+        solver, angles = Solver(scene(plain), turning=True), []  # as the node builds it
+        for (_, a, w), t1 in zip(rows, [r[0] for r in rows[1:]] + [stop]):
+            solver.advance(stamp_seconds(0, to_ns(t1)) - solver.t, a, w)  # the interval as the node computes it
+            angles.append(solver.angles)
+        return np.array(angles)
+
+    def error(angles, dt):
+        return np.abs(angles - exact.angles[np.rint(np.arange(1, len(angles) + 1) * dt / fine).astype(int)]).max()
+
+    rows = held_inputs(5e-3)
+    turns = {}
+    with sim_node(tmp_path, record=False, extra=["-p", f"scene:={tmp_path / 'plain.toml'}"]) as (proc, _):
+        ctl = Controller("turning_table_driver")
+        ctl.node.create_subscription(TFMessage, "/tf", lambda m: turns.update(
+            {to_ns(stamp_seconds(tr.header.stamp.sec, tr.header.stamp.nanosec)): tr.transform.rotation
+             for tr in m.transforms if tr.child_frame_id == "grape_cluster/rachis"}), QOS)
+        ctl.connect()
+        drive(ctl, [*rows, (stop, (0.0,) * 6)])  # each row: advance to its time, then hold its (a, α), set its ω
+        ctl.spin(0.3)
+        node = np.array([ctl.state_at(t).position for t in [r[0] for r in rows[1:]] + [stop]])
+        ctl.close()
+
+    np.testing.assert_array_equal(node, held_loop(rows))  # the same held inputs, the same solver: bit for bit
+    coarse, half = error(node, 5e-3), error(held_loop(held_inputs(fine)), fine)
+    assert 0.4 < half / coarse < 0.6, (coarse, half)  # the hold's error, first order in the step
+    assert coarse < 1e-2  # rad: the node follows the table's trajectory to that error
+    # its rachis frame turns with the table: ω set every step leaves an O(dt²) error per step
+    assert len(turns) > 30
+    for ns, q in turns.items():
+        k = int(round(ns * 1e-9 / fine))
+        offset = Rotation.from_quat([q.x, q.y, q.z, q.w]).inv() * Rotation.from_quat(exact.base_orientation[k])
+        assert offset.magnitude() < 2e-4, (ns, offset.magnitude())  # rad (7e-5 at 5 ms, a quarter at 2.5 ms)

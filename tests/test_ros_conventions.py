@@ -2,6 +2,8 @@
 each over DDS with the node in its own process."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -72,15 +74,15 @@ def test_a_tf_listener_resolves_world_to_every_berry_and_the_urdf_names_the_same
         ctl.spin(0.5)
         ctl.close()
     scene = load_scene(default_scene_path())
-    solver = Solver(scene)
+    solver = Solver(scene, turning=True)  # as the node builds it
     for (_, a), (t1, _) in zip(rows, rows[1:]):
-        solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, (a, 0.0))
+        solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, a)
     snap = solver.snapshot()
     p = snap.observation.position[0]
     d = snap.base_displacement[0]
     for i, name in enumerate(scene.model.names):
         T = tf.lookup("world", f"grape_cluster/{name}")
-        np.testing.assert_allclose(T[:3, 3], p[i] + (d[0], 0.0, d[1]), atol=1e-12)
+        np.testing.assert_allclose(T[:3, 3], p[i] + d, atol=1e-12)  # the rachis does not turn here
         hinge = tf.lookup("world", f"grape_cluster/{name}_hinge")[:3, 3]
         twig = hinge - T[:3, 3]
         np.testing.assert_allclose(T[:3, 2], twig / np.linalg.norm(twig), atol=1e-9)  # z along the twig
@@ -113,21 +115,28 @@ def test_a_best_effort_publisher_drives_the_node(ros, tmp_path):
         ctl.pub = ctl.node.create_publisher(AccelStamped, "rachis/accel", BEST_EFFORT)
         ctl.connect()
         rows = signal_rows(20)
+
+        def answered(t, a) -> bool:
+            ctl.send(t, a)
+            ctl.spin(0.02)
+            return ctl.state_at(t) is not None
+
         for t, a in rows:  # best effort may drop a message: resend until the node answers
-            ctl.wait_for(lambda t=t, a=a: ctl.send(t, a) or ctl.spin(0.02) or ctl.state_at(t) is not None)
+            ctl.wait_for(lambda t=t, a=a: answered(t, a))
         ctl.close()
     assert ctl.state_at(rows[-1][0]) is not None
 
 
 def test_the_gripper_motion_comes_from_a_tf_frame_of_another_process(ros, tmp_path):
-    """The node looks up `gripper` in `world` on /tf; a constant 2 m/s² carry along x must reach the solver
-    as (almost) 2 m/s², after the pose filter settles."""
+    """The node reads `world` → `gripper` on /tf, rotation included: a constant 2 m/s² carry along x while the
+    gripper turns at 0.5 rad/s² about y (the axis a planar scene may turn about) must reach the solver as (almost)
+    2 m/s² and 0.5 rad/s², after the pose filter settles."""
     import json
     import subprocess
     import sys
     from .test_ros_node import ENV
     publisher = """
-import time, rclpy
+import math, time, rclpy
 from tf2_msgs.msg import TFMessage
 from geometry_msgs.msg import TransformStamped
 rclpy.init()
@@ -141,7 +150,7 @@ for k in range(400):
     ns = int(round(t * 1e9))
     tr.header.stamp.sec, tr.header.stamp.nanosec = ns // 10**9, ns % 10**9
     tr.transform.translation.x = 0.5 * 2.0 * t * t
-    tr.transform.rotation.w = 1.0
+    tr.transform.rotation.y, tr.transform.rotation.w = math.sin(0.125 * t * t), math.cos(0.125 * t * t)
     pub.publish(TFMessage(transforms=[tr]))
     time.sleep(0.01)
 """
@@ -158,30 +167,88 @@ for k in range(400):
     ax = np.array([m.accel.linear.x for m in applied])
     assert len(ax) > 200, json.dumps(len(ax))
     np.testing.assert_allclose(ax[-50:], 2.0, rtol=0.05)
+    np.testing.assert_allclose([m.accel.angular.y for m in applied[-50:]], 0.5, rtol=0.05)
+    assert all(m.accel.angular.x == m.accel.angular.z == 0.0 for m in applied)
 
 
 def test_the_gripper_motion_comes_from_twist_messages(ros, tmp_path):
-    """TwistStamped on rachis/twist: a velocity rising at 3 m/s² along z reaches the solver as (almost) 3 m/s²
-    once the filter settles, and is recorded as the held acceleration of every interval."""
+    """TwistStamped on rachis/twist: a velocity rising at 3 m/s² along z and an angular velocity rising at
+    1.5 rad/s² about y reach the solver as (almost) 3 m/s² and 1.5 rad/s² once the filter settles, recorded as
+    the held acceleration of every interval; each message's angular velocity is set as it is, at the start of
+    the next interval, and recorded as rachis/twist_applied."""
     from geometry_msgs.msg import TwistStamped
 
-    applied = []
+    applied, omega = [], []
+    sent = {}
     with sim_node(tmp_path, record=False) as (proc, _):
         ctl = Controller("twist_input")
-        twist = ctl.node.create_publisher(TwistStamped, "rachis/twist", QOS)
         ctl.node.create_subscription(AccelStamped, "rachis/accel_applied", applied.append, QOS)
+        ctl.node.create_subscription(TwistStamped, "rachis/twist_applied", omega.append, QOS)
         ctl.connect()
-        ctl.wait_for(lambda: twist.get_subscription_count() > 0)
+        ctl.wait_for(lambda: ctl.twist.get_subscription_count() > 0)
         for k in range(300):
+            t = 0.01 * (k + 1)
             m = TwistStamped()
-            ns = int(round(0.01 * (k + 1) * 1e9))
+            ns = int(round(t * 1e9))
             m.header.stamp.sec, m.header.stamp.nanosec = ns // 10**9, ns % 10**9
-            m.twist.linear.z = 3.0 * 0.01 * (k + 1)
-            twist.publish(m)
+            m.twist.linear.z, m.twist.angular.y = 3.0 * t, 1.5 * t
+            sent[ns] = 1.5 * t
+            ctl.twist.publish(m)
             ctl.spin(0.01)
         ctl.spin(0.5)
         ctl.close()
     az = np.array([m.accel.linear.z for m in applied])
     assert len(az) > 100
     np.testing.assert_allclose(az[-50:], 3.0, rtol=0.05)
+    np.testing.assert_allclose([m.accel.angular.y for m in applied[-50:]], 1.5, rtol=0.05)
     assert np.all(np.abs([m.accel.linear.x for m in applied]) < 1e-12)
+    # each message's ω acts from its stamp: the last one's waits for an interval that never comes
+    assert len(omega) > 100 and all(m.header.frame_id == "world" for m in omega)
+    assert {m.twist.angular.y for m in omega} <= set(sent.values())
+    assert all(m.twist.angular.x == m.twist.angular.z == 0.0 for m in omega)
+
+
+def test_six_dof_inputs_in_their_frames_are_held_recorded_and_replayed_exactly(ros, tmp_path):
+    """A cluster of spherical berries whose rachis starts turned a quarter turn about z and spinning: an
+    acceleration given in the rachis frame is held in the world frame (turned by the rachis' orientation when it
+    starts to act), world-frame accelerations and angular velocities (rachis/twist, each set at its stamp) act as
+    sent, and `grapefmu replay --check` re-simulates the recording bit for bit from rachis/accel_applied and
+    rachis/twist_applied, also across a reset that repeats the stamps with other inputs."""
+    from std_srvs.srv import Trigger
+    from geometry_msgs.msg import TwistStamped
+
+    from grapefmu.recording.replay import check, read_recording
+    from grapefmu.scenefile.toml_out import dumps
+
+    from .conftest import dual
+
+    doc = dual(left={"kind": "spherical", "angle": [-0.6, 0.2]}, right={"kind": "spherical", "angle": [0.6, -0.1]},
+               excitation={"kind": "none", "orientation": [0.0, 0.0, math.pi / 2],
+                           "angular_velocity": [0.3, -0.2, 0.5]})
+    (tmp_path / "turned.toml").write_text(dumps(doc))
+    rng = np.random.default_rng(3)
+    rows = [(0.01 * k, tuple(rng.uniform(-4, 4, 6)), tuple(rng.uniform(-1, 1, 3))) for k in range(2, 40)]
+    applied, omega = [], []
+    with sim_node(tmp_path, extra=["-p", f"scene:={tmp_path / 'turned.toml'}"]) as (proc, rec):
+        ctl = Controller("six_dof")
+        ctl.node.create_subscription(AccelStamped, "rachis/accel_applied", applied.append, QOS)
+        ctl.node.create_subscription(TwistStamped, "rachis/twist_applied", omega.append, QOS)
+        ctl.connect()
+        drive(ctl, [(0.0, (1.0, 0.0, 0.0, 0.0, 0.0, 0.5), None, "grape_cluster/rachis"),
+                    (0.01, (0.0, 0.0, 2.0, 0.3, 0.0, 0.0)), *rows])
+        ctl.wait_for(lambda: len(applied) == len(rows) + 1 and len(omega) == len(rows) - 1)
+        first, second = applied[0].accel, applied[1].accel
+        sent = [w for _, _, w in rows[:-1]]  # the last ω is set at the start of an interval never integrated
+        got = [(m.twist.angular.x, m.twist.angular.y, m.twist.angular.z) for m in omega]
+        # a reset, then the same stamps with other inputs: the replay must pair them by their place in the file
+        assert ctl.call(ctl.reset, Trigger.Request()).success
+        drive(ctl, [(0.0, (0.0,) * 6), *[(t, tuple(-v for v in a), w) for t, a, w in rows[:10]]])
+        ctl.close()
+    # (1, 0, 0) and (0, 0, 0.5) in the rachis frame, a quarter turn about z: (0, 1, 0) and (0, 0, 0.5) in the world
+    np.testing.assert_allclose([first.linear.x, first.linear.y, first.linear.z], (0.0, 1.0, 0.0), atol=1e-15)
+    np.testing.assert_allclose([first.angular.x, first.angular.y, first.angular.z], (0.0, 0.0, 0.5), atol=1e-15)
+    assert (second.linear.z, second.angular.x) == (2.0, 0.3)
+    assert got == sent
+    assert len(read_recording(rec).topics["rachis/twist_applied"]) == len(rows) - 1 + 9
+    result = check(rec)
+    assert result.max_deviation == 0.0 and result.compared > len(rows) + 10

@@ -1,6 +1,7 @@
 """The ROS 2 node in its own process, driven over real DDS by this process acting as the controller."""
 from __future__ import annotations
 
+import collections
 import math
 import os
 import random
@@ -16,7 +17,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy")
 
-from geometry_msgs.msg import AccelStamped  # noqa: E402
+from geometry_msgs.msg import AccelStamped, TwistStamped  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
@@ -25,14 +26,19 @@ from grapefmu_msgs.msg import CollisionEvent, Contacts, Summary  # noqa: E402
 
 from grapefmu import Solver, load_scene  # noqa: E402
 from grapefmu.scenefile import default_scene_path  # noqa: E402
+from grapefmu.recording import messages as msgs  # noqa: E402
 from grapefmu.recording.messages import absolute  # noqa: E402
 from grapefmu.recording.replay import check, read_recording  # noqa: E402
-from grapefmu.recording.stamps import stamp_seconds  # noqa: E402
+from grapefmu.recording.stamps import stamp_seconds, to_ns  # noqa: E402
+from grapefmu.recording.typestore import serialize  # noqa: E402
 
 from .recordings import decode_everything  # noqa: E402
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-DOMAIN = str(random.randint(1, 50))  # ≤ 101: higher domains put DDS ports in Linux's ephemeral range
+#: ≤ 101: higher domains put DDS ports in Linux's ephemeral range. GRAPEFMU_TEST_DOMAIN fixes it (e.g. 51 to 100,
+#: clear of the random ones, for runs side by side); the replay test takes a domain of its own, REPLAY_DOMAIN
+DOMAIN = os.environ.get("GRAPEFMU_TEST_DOMAIN") or str(random.randint(1, 50))
+REPLAY_DOMAIN = str(int(DOMAIN) + 50 if int(DOMAIN) <= 50 else int(DOMAIN) + 1)
 DDS = {"ROS_DOMAIN_ID": DOMAIN, "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
 ENV = {**os.environ, **DDS}
 
@@ -46,13 +52,15 @@ def ros():
 
 
 class Controller:
-    """This process's side: publishes rachis/accel, collects what the node publishes."""
+    """This process's side: publishes rachis/accel (and rachis/twist), collects what the node publishes."""
 
     def __init__(self, name="test_controller"):
         self.node = rclpy.create_node(name, namespace="/grape_cluster")  # the node's default namespace
         self.pub = self.node.create_publisher(AccelStamped, "rachis/accel", QOS)
+        self.twist = self.node.create_publisher(TwistStamped, "rachis/twist", QOS)
         self.states, self.events, self.diags = [], [], []
-        self.node.create_subscription(JointState, "joint_states", self.states.append, QOS)
+        self.answers = collections.Counter()  # stamp (ns) -> joint_states received at it
+        self.node.create_subscription(JointState, "joint_states", self._state, QOS)
         self.node.create_subscription(CollisionEvent, "collision_events", self.events.append, QOS)
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self.diags.append, QOS)
         self.reset = self.node.create_client(Trigger, "reset")
@@ -70,17 +78,36 @@ class Controller:
                 raise TimeoutError("the node did not answer in time")
             rclpy.spin_once(self.node, timeout_sec=0.01)
 
-    def connect(self):
+    def connect(self, lockstep=True):
+        """Wait until this controller and the node see each other; in lockstep mode, until the node answers an
+        input. Its inputs are best-effort readers, which may match this writer later than this writer matches
+        them, and drop what comes before: a probe, zero acceleration at t = 0 (what the node holds from the
+        start), is sent until answered. Two answers at t = 0 mean one came: the node's initial state is one."""
         self.wait_for(lambda: self.pub.get_subscription_count() > 0 and
                       self.node.count_publishers("joint_states") > 0 and self.reset.service_is_ready())
         self.spin(0.5)
+        if lockstep:
+            def probe() -> bool:
+                self.send(0.0, (0.0,) * 6)
+                self.spin(0.1)
+                return self.answers[0] >= 2
 
-    def send(self, t, ax, ay=0.0):
-        m = AccelStamped()
-        ns = int(round(t * 1e9))
-        m.header.stamp.sec, m.header.stamp.nanosec = ns // 10**9, ns % 10**9
-        m.accel.linear.x, m.accel.linear.z = float(ax), float(ay)
-        self.pub.publish(m)
+            self.wait_for(probe)
+            self.spin(0.3)  # the answers to probes still on their way
+
+    def _state(self, m):
+        self.states.append(m)
+        self.answers[m.header.stamp.sec * 10**9 + m.header.stamp.nanosec] += 1
+
+    def send(self, t, a, omega=None, frame=msgs.WORLD) -> int:
+        """rachis/accel at t: a (ACCEL_COMPONENTS, m/s² and rad/s²) in `frame`; with omega (rad/s, world) also a
+        rachis/twist at t, which sets ω at t (the acceleration at its stamp is the accel's). Both built by the
+        node's own messages.py. Returns how many messages went: the node answers each with a state at t."""
+        ns = to_ns(t)
+        if omega is not None:
+            self.twist.publish(serialize(msgs.twist(ns, omega)[1]))
+        self.pub.publish(serialize(msgs.accel(ns, a, frame=frame)[1]))
+        return 1 if omega is None else 2
 
     def state_at(self, t):
         for s in reversed(self.states):
@@ -115,15 +142,22 @@ def sim_node(tmp_path, mode="lockstep", record=True, extra=()):
                 p.kill()
 
 
+def along_x(ax) -> tuple:
+    """The rachis acceleration (ACCEL_COMPONENTS) of a carry along x at ax m/s²."""
+    return (float(ax), 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
 def signal_rows(n=150, dt=0.01, seed=1):
     rng = np.random.default_rng(seed)
-    return [(k * dt, float(a)) for k, a in enumerate(rng.uniform(-8, 8, n))]
+    return [(k * dt, along_x(a)) for k, a in enumerate(rng.uniform(-8, 8, n))]
 
 
 def drive(ctl, rows):
-    for t, a in rows:
-        ctl.send(t, a)
-        ctl.wait_for(lambda t=t: ctl.state_at(t) is not None)
+    """Each row (t, a) or (t, a, ω): sent, then its answers awaited (one state at t per message)."""
+    for t, *row in rows:
+        n = ctl.answers[to_ns(t)]
+        sent = ctl.send(t, *row)
+        ctl.wait_for(lambda t=t: ctl.answers[to_ns(t)] >= n + sent)
 
 
 def test_lockstep_answers_at_input_stamps_and_events_match_the_core(ros, tmp_path):
@@ -137,10 +171,10 @@ def test_lockstep_answers_at_input_stamps_and_events_match_the_core(ros, tmp_pat
         stamps = {round(stamp_seconds(s.header.stamp.sec, s.header.stamp.nanosec), 9) for s in ctl.states}
         assert {round(t, 9) for t, _ in rows} <= stamps
         # the same held inputs through the core directly
-        solver = Solver(load_scene(default_scene_path()))
+        solver = Solver(load_scene(default_scene_path()), turning=True)  # as the node builds it
         onsets = []
         for (_, a), (t1, _) in zip(rows, rows[1:]):
-            solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, (a, 0.0))  # as the node computes it
+            solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, a)  # as the node computes it
             onsets += list(solver.take_impacts().onset)
         last = ctl.state_at(rows[-1][0])
         np.testing.assert_array_equal(last.position, solver.angles)
@@ -168,12 +202,12 @@ def test_lockstep_is_deterministic_and_reset_pause_work(ros, tmp_path):
         # paused: inputs do not advance time
         assert ctl.call(ctl.pause, SetBool.Request(data=True)).success
         n = len(ctl.states)
-        ctl.send(rows[-1][0] + 0.5, 1.0)
+        ctl.send(rows[-1][0] + 0.5, along_x(1.0))
         ctl.spin(1.0)
         assert all(stamp_seconds(s.header.stamp.sec, s.header.stamp.nanosec) <= rows[-1][0] + 1e-12
                    for s in ctl.states[n:])
         assert ctl.call(ctl.pause, SetBool.Request(data=False)).success
-        ctl.send(rows[-1][0] + 0.6, 0.0)
+        ctl.send(rows[-1][0] + 0.6, along_x(0.0))
         ctl.wait_for(lambda: ctl.state_at(rows[-1][0] + 0.6) is not None)
         ctl.close()
 
@@ -182,15 +216,21 @@ def test_bad_inputs_are_rejected_and_the_node_survives(ros, tmp_path):
     with sim_node(tmp_path, record=False) as (proc, _):
         ctl = Controller("bad")
         ctl.connect()
-        drive(ctl, [(0.0, 1.0), (0.01, 1.0)])
-        for t, a in ((0.02, math.nan), (0.03, math.inf), (0.04, 1e4), (0.005, 1.0)):  # the last goes backwards
-            ctl.send(t, a)
+        drive(ctl, [(0.0, along_x(1.0)), (0.01, along_x(1.0))])
+        bad = [(0.02, along_x(math.nan)), (0.03, along_x(math.inf)), (0.04, along_x(1e4)),
+               (0.045, (0.0, 0.0, 0.0, 0.0, 2e3, 0.0)),    # an angular acceleration above max_angular_accel
+               (0.046, along_x(1.0), (0.0, 200.0, 0.0)),    # an angular velocity above the solver's bound (the
+               (0.047, (0.0, 0.0, 0.0, 3.0, 0.0, 0.0)),     # accel still counts); a turn about x: planar berries
+               (0.048, along_x(1.0), None, "gripper"),      # a frame the node does not know
+               (0.005, along_x(1.0))]                       # goes backwards
+        for t, *row in bad:
+            ctl.send(t, *row)
         ctl.spin(1.0)
-        assert ctl.state_at(0.02) is None and ctl.state_at(0.03) is None and ctl.state_at(0.04) is None
+        assert not any(ctl.state_at(t) for t in (0.02, 0.03, 0.04, 0.045, 0.047, 0.048))
         assert proc.poll() is None
-        drive(ctl, [(0.05, 2.0)])
+        drive(ctl, [(0.05, along_x(2.0))])
         assert np.all(np.isfinite(ctl.state_at(0.05).position))
-        ctl.wait_for(lambda: any(kv.key == "rejected_inputs" and int(kv.value) == 4
+        ctl.wait_for(lambda: any(kv.key == "rejected_inputs" and int(kv.value) == 8
                                  for d in ctl.diags for kv in d.status[0].values), timeout=5)
         ctl.close()
         out = proc.stdout
@@ -200,7 +240,7 @@ def test_bad_inputs_are_rejected_and_the_node_survives(ros, tmp_path):
 def test_realtime_mode_follows_the_wall_clock_and_sigterm_leaves_a_complete_file(ros, tmp_path):
     with sim_node(tmp_path, mode="realtime") as (proc, rec):
         ctl = Controller("rt")
-        ctl.connect()
+        ctl.connect(lockstep=False)
         ctl.spin(0.5)
         t0, w0 = ctl.states[-1], time.monotonic()
         ctl.spin(2.0)
@@ -217,7 +257,7 @@ def test_realtime_mode_follows_the_wall_clock_and_sigterm_leaves_a_complete_file
 def test_killed_node_leaves_a_readable_file_up_to_its_last_chunk(ros, tmp_path):
     with sim_node(tmp_path, mode="realtime") as (proc, rec):
         ctl = Controller("kill")
-        ctl.connect()
+        ctl.connect(lockstep=False)
         ctl.spin(2.0)
         proc.kill()
         proc.wait()
@@ -256,7 +296,8 @@ def test_recordings_read_the_same_in_rosbags_and_mcap_ros2(ros, tmp_path):
                 if topic == "joint_states":
                     assert list(a.position) == list(b.position) and list(a.effort) == list(b.effort)
                 elif topic == "rachis/accel_applied":
-                    assert a.accel.linear.x == b.accel.linear.x
+                    assert a.header.frame_id == b.header.frame_id == "world"
+                    assert a.accel.linear.x == b.accel.linear.x and a.accel.angular.y == b.accel.angular.y
                 else:
                     assert a.wrench.force.x == b.wrench.force.x
 
@@ -289,7 +330,7 @@ def test_replay_publish_republishes_the_recorded_topics(tmp_path):
     run = simulate(load_scene(default_scene_path()), 0.2)
     rec = tmp_path / "sim.mcap"
     write_run(run, rec)
-    env = {**ENV, "ROS_DOMAIN_ID": str(int(DOMAIN) + 50)}  # a domain of its own, no earlier test's participants
+    env = {**ENV, "ROS_DOMAIN_ID": REPLAY_DOMAIN}  # a domain of its own, no earlier test's participants
     listener = subprocess.Popen([sys.executable, "-c", LISTENER, "12"], env=env, stdout=subprocess.PIPE,
                                 stderr=subprocess.STDOUT, text=True)
     early = []
@@ -315,7 +356,7 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
 
     scene = tmp_path / "cluster.toml"
     assert cli(["cluster", "--berries", "30", "--seed", "2", "-o", str(scene)]) == 0
-    rows = [(k * 0.01, float(8.0 * math.sin(2 * math.pi * 3 * k * 0.01))) for k in range(60)]
+    rows = [(k * 0.01, along_x(8.0 * math.sin(2 * math.pi * 3 * k * 0.01))) for k in range(60)]
     with sim_node(tmp_path, extra=["-p", f"scene:={scene}", "-p", "marker_rate_hz:=50.0"]) as (proc, rec):
         ctl = Controller("cluster_controller")
         summaries, contacts, markers = [], [], []
@@ -328,9 +369,9 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
         ctl.wait_for(lambda: any(s.time == pytest.approx(rows[-1][0], abs=1e-12) for s in summaries))
         ctl.spin(0.5)
         ctl.close()
-    solver = Solver(load_scene(scene))
+    solver = Solver(load_scene(scene), turning=True)
     for (_, a), (t1, _) in zip(rows, rows[1:]):
-        solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, (a, 0.0))
+        solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, a)
     t_last = rows[-1][0]
     last = ctl.state_at(t_last)
     assert len(last.name) == 60 and last.name[:2] == ["twig_b000_swing", "twig_b000_tilt"]

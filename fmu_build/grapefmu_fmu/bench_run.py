@@ -1,8 +1,8 @@
 """One benchmark run of a scene's FMU through fmpy at 1 ms communication steps (used by grapefmu bench).
 
 `python -m grapefmu_fmu.bench_run SCENE.toml` builds the FMU in a separate process, then steps it here
-with the scene's excitation sampled and held every 1 ms, and prints JSON: the angles on the 1 ms grid
-and the wall time of the stepping loop (best of 3)."""
+with the scene's excitation sampled and held every 1 ms (core.held_inputs), and prints JSON: the angles on
+the 1 ms grid and the wall time of the stepping loop (best of 3)."""
 from __future__ import annotations
 
 import json
@@ -20,7 +20,7 @@ def main(scene_path: str) -> None:
     from fmpy.fmi2 import FMU2Slave
 
     from grapefmu import load_scene
-    from grapefmu.physics.excitation import accel
+    from grapefmu_fmu.core import INPUTS, held_inputs
     scene = load_scene(scene_path)
     with tempfile.TemporaryDirectory() as d:
         fmu = Path(d) / "bench.fmu"
@@ -31,7 +31,8 @@ def main(scene_path: str) -> None:
         outs = [vr[f"angle_{b}"] for b in scene.model.names]
         unzip = extract(str(fmu))
         dt, steps = 1e-3, int(round(scene.solver.t_end / 1e-3))
-        acc = accel(scene.excitation, np.arange(steps) * dt)
+        inputs = [vr[n] for n in INPUTS]
+        u = held_inputs(scene.excitation, np.arange(steps) * dt).tolist()
         best, angles = float("inf"), None
         for rep in range(3):
             f = FMU2Slave(guid=md.guid, unzipDirectory=unzip, modelIdentifier=md.coSimulation.modelIdentifier,
@@ -43,7 +44,7 @@ def main(scene_path: str) -> None:
             rows = [f.getReal(outs)]
             w = time.perf_counter()
             for k in range(steps):
-                f.setReal([vr["base_ax"], vr["base_az"]], [float(acc[k, 0]), float(acc[k, 1])])
+                f.setReal(inputs, u[k])
                 f.doStep(currentCommunicationPoint=k * dt, communicationStepSize=dt)
                 rows.append(f.getReal(outs))
             best = min(best, time.perf_counter() - w)

@@ -22,7 +22,7 @@ from grapefmu.results.writers import atomic_path
 
 from . import shim
 from .units import BASE_UNITS
-from .core import OUTPUTS_FILE
+from .core import INPUTS, OUTPUTS_FILE
 from .variables import OUTPUT_SETS, default_outputs, variables
 
 PACKAGES = (Path(grapefmu.__file__).parent, Path(__file__).parent)
@@ -118,7 +118,8 @@ def build_fmu(scene_path: str | Path, out: str | Path, fmi: int = 2, outputs: st
         raise grapefmu.GrapefmuError(f"outputs: expected one of {', '.join(OUTPUT_SETS)}, got {outputs!r}")
     if scene.excitation.kind in ("csv", "pose-table"):  # a file the FMU would not carry
         raise grapefmu.GrapefmuError(f"an FMU is driven by its inputs; remove the scene's [excitation] "
-                                     f"{scene.excitation.kind} table (feed its accelerations as base_ax, base_az)")
+                                     f"{scene.excitation.kind} table (feed its motion as the inputs "
+                                     f"{', '.join(INPUTS)})")
     out = Path(out)
     ident = model_identifier(scene.name, scene.source + outputs, fmi)
     with tempfile.TemporaryDirectory(prefix="grapefmu_fmu_") as tmp:

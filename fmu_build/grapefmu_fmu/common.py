@@ -12,7 +12,7 @@ from pathlib import Path
 from grapefmu import GrapefmuError, __version__
 from grapefmu.solver.warmup import notice
 
-from .core import INPUT_BOUNDS, FmuCore
+from .core import FmuCore
 from .report import stderr_refuse, refuse_function
 
 OK, WARNING, DISCARD, ERROR, FATAL = range(5)  # fmi2Status and fmi3Status share these codes
@@ -79,12 +79,20 @@ class GrapeSlaveMixin:
 
     @functools.cached_property
     def _inputs(self) -> dict:
-        """{variable class: {value reference: (name, largest magnitude)}} of the real inputs, for _set's fast path."""
+        """{variable class: {value reference: (name, largest magnitude)}} of the real inputs, for _set's fast path
+        (a bound of 0: only 0 is accepted there, anything else gets value_problem's message)."""
         out: dict = {}
+        bounds = self._inputs_from = self.core.input_bounds
         for vr, var in self.vars.items():
-            if var.causality.name == "input" and var.name in INPUT_BOUNDS:
-                out.setdefault(type(var), {})[vr] = (var.name, INPUT_BOUNDS[var.name])
+            if var.causality.name == "input" and var.name in bounds:
+                out.setdefault(type(var), {})[vr] = (var.name, bounds[var.name])
         return out
+
+    def _bounds_changed(self) -> None:
+        """A new solver (its scene's orientation) may allow other turns: _inputs is built again from the core's
+        input_bounds when they are new."""
+        if self.__dict__.get("_inputs_from") is not self.core.input_bounds:
+            self.__dict__.pop("_inputs", None)
 
     def _register(self, var) -> None:
         kw = {"description": var.description, **self._accessors(var), **self.KINDS[var.causality, var.type == "real"]}
@@ -165,6 +173,7 @@ class GrapeSlaveMixin:
     def exit_initialization_mode(self):
         notice(lambda line: self._refuse(line, OK))  # logged (status OK) before the core's first compile
         err = self.core.initialize(self.start_time)
+        self._bounds_changed()
         if err:
             self._refuse(err)
         else:
@@ -190,6 +199,7 @@ class GrapeSlaveMixin:
             return
         try:
             self.core.set_state(state)
+            self._bounds_changed()
         except GrapefmuError as e:
             self._refuse(f"setFMUState refused, the FMU keeps its state: {e}")
         except Exception as e:  # noqa: BLE001 - a state object the host made up

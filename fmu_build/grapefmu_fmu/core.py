@@ -3,33 +3,60 @@
 Parameters are collected as numbers, turned into a scene and validated by grapefmu's own scene
 checks when initialization ends; each do_step integrates the whole communication step with the
 event-driven solver (so results do not depend on the master's step) and refuses, leaving the state
-untouched, anything it cannot integrate."""
+untouched, anything it cannot integrate. The inputs are the output catalogue's: the rachis' linear and
+angular acceleration, held over the step, and its angular velocity, set at the step's start."""
 from __future__ import annotations
 
 import copy
 import io
 import math
+import operator
 import tomllib
 from pathlib import Path
 
 import numpy as np
 
 from grapefmu import GrapefmuError, Solver
-from grapefmu.errors import StateError
+from grapefmu.errors import SceneError, StateError
 from grapefmu.model.contact import LAWS, Law
+from grapefmu.model.model import off_axis
+from grapefmu.physics.excitation import ACCEL_COMPONENTS, accel
+from grapefmu.results.catalogue import CHANNELS
 from grapefmu.scenefile import parse_scene, scene_from_dict
 from grapefmu.solver import state as solver_state
-from grapefmu.solver.solver import MAX_ACCEL
+from grapefmu.model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 
-from .variables import OUTPUT_SETS, Var, default_outputs, variables
+from .variables import ORIENTATION, OUTPUT_SETS, Var, default_outputs, variables
 
 
 OUTPUTS_FILE = "outputs.txt"  # in the resources next to the scene: "full" or "summary"
-INPUTS = ("base_ax", "base_az")
-INPUT_BOUNDS = {name: MAX_ACCEL for name in INPUTS}  # the largest magnitude each input takes, m/s²
+_INPUT_CHANNELS = [c for c in CHANNELS if c.fmu and c.fmi_causality == "input"]
+#: the rachis acceleration (ACCEL_COMPONENTS: m/s², rad/s², world frame), held over each communication step
+ACCEL_INPUTS = tuple(c.name for c in _INPUT_CHANNELS if c.topic == "rachis/accel")
+#: the rachis angular velocity (ω_x, ω_y, ω_z: rad/s, world frame), set at the start of each communication step
+OMEGA_INPUTS = tuple(c.name for c in _INPUT_CHANNELS if c.topic == "rachis/twist")
+INPUTS = ACCEL_INPUTS + OMEGA_INPUTS
+assert len(ACCEL_INPUTS) == len(ACCEL_COMPONENTS) and len(OMEGA_INPUTS) == 3 and len(INPUTS) == len(_INPUT_CHANNELS)
+#: what each input is, and the largest magnitude it takes: the solver's own bounds
+_KIND = {"m/s2": ("an acceleration", MAX_ACCEL, "m/s²"), "rad/s2": ("an angular acceleration", MAX_ANGULAR_ACCEL, "rad/s²"),
+         "rad/s": ("an angular velocity", MAX_ANGULAR_VELOCITY, "rad/s")}
+INPUT_KIND = {c.name: _KIND[c.unit] for c in _INPUT_CHANNELS}
+INPUT_BOUNDS = {name: kind[1] for name, kind in INPUT_KIND.items()}
+#: the angular inputs per world axis x, y, z: (angular acceleration, angular velocity)
+ANGULAR_INPUTS = tuple(zip(ACCEL_INPUTS[3:], OMEGA_INPUTS))
 DISCARD, ERROR = 2, 3  # FMI 2 and 3 status codes
 #: solver steps one communication step may take: beyond this the step is refused (Discard) in bounded time
 STEP_BUDGET = 100_000
+
+
+def held_inputs(excitation, t) -> np.ndarray:
+    """The inputs (INPUTS, one row per time of t) that give the FMU `excitation` held from each time of t to the
+    next: (a, α) sampled at t, and ω at t as that held α leaves it (world frame, so ω(t_k+1) = ω(t_k) + α_k Δt
+    exactly, from the excitation's initial ω). A master that feeds them reproduces a run of the held excitation."""
+    t = np.asarray(t, dtype=float)
+    a = accel(excitation, t)
+    turned = np.cumsum(a[:-1, 3:] * np.diff(t)[:, None], axis=0)
+    return np.column_stack([a, np.asarray(excitation.angular_velocity) + np.vstack([np.zeros((1, 3)), turned])])
 
 
 class FmuCore:
@@ -56,6 +83,12 @@ class FmuCore:
         self._snap = None  # the solver's snapshot, refreshed when an output is first read after a step
         self._views: dict[str, np.ndarray] = {}  # channels whose value is a view on the state (_use)
         self.values: dict[str, float | int | bool] = self._start_values()
+        #: a planar berry's swing plane is the rachis' x–z plane: the world direction of its normal (the rachis' y
+        #: axis) once initialization fixes the orientation, about which alone the rachis may turn; else None
+        self.plane_normal: tuple[float, float, float] | None = None
+        self.input_bounds = self._input_bounds()
+        self._held = operator.itemgetter(*ACCEL_INPUTS)
+        self._omega = operator.itemgetter(*OMEGA_INPUTS)
         self.solver: Solver | None = None
         self.error: str | None = None
         self.start_time = 0.0
@@ -63,12 +96,14 @@ class FmuCore:
     # --- values -----------------------------------------------------------------------------------
     def _start_values(self) -> dict:
         """Inputs and outputs start at zero (angles and rates at the scene's initial state, which their start
-        values set), parameters at the scene's values."""
+        values set), parameters at the scene's values (the rachis' orientation from its [excitation])."""
         m, sc = self.model, self.scene
         val: dict = {}
         for var in self.vars:
             if var.channel is not None:
                 val[var.name] = {"real": 0.0, "integer": 0, "boolean": False}[var.type]
+        rpy = self.doc.get("excitation", {}).get("orientation", (0.0, 0.0, 0.0))
+        val.update({name: float(x) for name, x in zip(ORIENTATION, rpy)})
         for k, d in enumerate(m.dof_names if self.full else ()):
             val.update({f"initial_angle_{d}": sc.angles[k], f"initial_angular_velocity_{d}": sc.angular_velocities[k]})
         for b in m.berries if self.full else ():
@@ -89,7 +124,8 @@ class FmuCore:
         """The scene the parameter values describe, checked by the same validator as a TOML file."""
         v = self.values
         doc = copy.deepcopy(self.doc)
-        doc.pop("excitation", None)  # the inputs drive the rachis
+        # the inputs drive the rachis; the parameters give its initial orientation
+        doc["excitation"] = {"kind": "none", "orientation": [v[name] for name in ORIENTATION]}
         for b in doc["berries"] if self.full else ():
             n = b["name"]
             if b.get("kind", "planar") == "spherical":
@@ -129,14 +165,34 @@ class FmuCore:
         doc.setdefault("solver", {})["rtol"] = v["rtol"]
         doc["solver"]["atol"] = min(doc["solver"].get("atol", 1e-10), v["rtol"] * 1e-2) if v["rtol"] > 0 else 1e-10
         doc["solver"]["method"] = "event"
-        return scene_from_dict(doc, self.base_dir, name=self.scene.name)
+        try:
+            return scene_from_dict(doc, self.base_dir, name=self.scene.name)
+        except SceneError as e:  # the orientation is checked by the scene's validator: name the parameters
+            if not e.key.startswith("excitation.orientation"):
+                raise
+            why = str(e)[len(e.key) + 2:]
+            if e.key == "excitation.orientation":  # a planar scene's swing plane tilted
+                raise GrapefmuError(f"{', '.join(f'{k} = {v[k]!r}' for k in ORIENTATION)}: {why}; for planar berries "
+                                    f"{ORIENTATION[0]} must be 0") from None
+            raise GrapefmuError(f"{ORIENTATION[int(e.key[-2])]}: {why}") from None
+
+    def _input_bounds(self) -> dict[str, float]:
+        """The largest magnitude each input takes: the solver's bound, or 0 for an angular input about a world axis
+        that a planar scene's rachis cannot turn about: z before initialization (its swing plane stays vertical),
+        then every axis its plane's normal has no component along (x and z at the default orientation). A turn
+        about another axis between x and y is refused at doStep (_turn_problem)."""
+        planar = not all(b.spherical for b in self.model.berries)
+        n = self.plane_normal
+        fixed = [k for k in range(3) if (n[k] == 0.0 if n is not None else k == 2)] if planar else []
+        zero = {name for k in fixed for name in ANGULAR_INPUTS[k]}
+        return {name: 0.0 if name in zero else bound for name, bound in INPUT_BOUNDS.items()}
 
     def initialize(self, start_time: float = 0.0) -> str | None:
         """Build the solver from the parameters; returns an error message instead of raising."""
         try:
             self.scene = self.scene_from_parameters()
             self.start_time = start_time
-            self._use(Solver(self.scene, t_start=start_time, max_steps=STEP_BUDGET))
+            self._use(Solver(self.scene, t_start=start_time, max_steps=STEP_BUDGET, turning=True))
             self.error = None
         except GrapefmuError as e:
             self._use(None)
@@ -160,22 +216,51 @@ class FmuCore:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
         if not ok:
             return f"{name} = {value!r}: expected a finite {kind.__name__}; value refused"
-        if name in INPUT_BOUNDS and abs(value) > INPUT_BOUNDS[name]:
-            return (f"input {name} = {value!r}: expected an acceleration within ±{INPUT_BOUNDS[name]:g} m/s²; "
-                    "value refused")
+        bound = self.input_bounds.get(name)
+        if bound is not None and abs(value) > bound:
+            what, _, unit = INPUT_KIND[name]
+            if bound == 0.0:
+                return f"input {name} = {value!r}: {self._planar_turn()}; value refused"
+            return f"input {name} = {value!r}: expected {what} within ±{bound:g} {unit}; value refused"
+        return None
+
+    def _planar_turn(self) -> str:
+        """Why a planar scene refuses a turn."""
+        n = self.plane_normal
+        axis = f"{tuple(round(c, 6) for c in n)} (world)" if n is not None else "(horizontal: set by rachis_yaw)"
+        zero = ", ".join(name for name, bound in self.input_bounds.items() if bound == 0.0)
+        return (f"this scene has planar berries, which swing in the rachis' x–z plane, so the rachis may turn only "
+                f"about its y axis {axis}: {zero} must be 0 (use spherical berries for any rotation)")
+
+    def _turn_problem(self, alpha: tuple, omega: tuple) -> str | None:
+        """Why a planar scene (plane_normal set) cannot take this held angular acceleration and angular velocity
+        (about an axis other than its plane's normal), or None: the solver's own check, made here so the step is
+        refused (Error) rather than attempted (Discard)."""
+        n = self.plane_normal
+        for names, w in zip((ACCEL_INPUTS[3:], OMEGA_INPUTS), (alpha, omega)):
+            if off_axis(w, n):
+                return (f"inputs {', '.join(f'{k} = {x!r}' for k, x in zip(names, w))}: not along the rachis' y axis "
+                        f"{tuple(round(c, 6) for c in n)} (world), the normal of this scene's planar berries' swing "
+                        "plane, the only axis the rachis may turn about (use spherical berries for any rotation)")
         return None
 
     def step(self, t: float, dt: float) -> tuple[int, str] | None:
-        """Integrate [t, t + dt] with the inputs held. Returns None, or (FMI status, message) with the state
-        unchanged: Error for a request the FMU cannot accept, Discard when the solver could not finish."""
+        """Integrate [t, t + dt] with the accelerations held and the rachis' angular velocity set to the ω inputs
+        at t. Returns None, or (FMI status, message) with the state unchanged: Error for a request the FMU cannot
+        accept, Discard when the solver could not finish."""
         if self.solver is None:
             return ERROR, self.error or "doStep before exitInitializationMode"
         if not (math.isfinite(dt) and dt > 0):
             return ERROR, f"communication step: expected a finite step > 0 s, got {dt!r}"
         if abs(t - self.solver.t) > 1e-9 * max(1.0, abs(t)):
             return ERROR, f"currentCommunicationPoint {t!r} s does not continue from the FMU's time {self.solver.t!r} s"
+        held, omega = self._held(self.values), self._omega(self.values)
+        if self.plane_normal is not None and (held[3] or held[4] or held[5] or omega[0] or omega[1] or omega[2]):
+            problem = self._turn_problem(held[3:], omega)
+            if problem:
+                return ERROR, f"step [{t:.9g}, {t + dt:.9g}] s refused, the FMU keeps its state: {problem}"
         try:
-            self.solver.advance(dt, tuple(map(self.values.__getitem__, INPUTS)))
+            self.solver.advance(dt, held, omega)
         except GrapefmuError as e:
             return DISCARD, f"step [{t:.9g}, {t + dt:.9g}] s not taken, the FMU keeps its state: {e}"
         self.solver.take_impacts()  # the totals count them; keep the list of finished impacts from growing
@@ -184,7 +269,12 @@ class FmuCore:
 
     def _use(self, solver: Solver | None) -> None:
         """Step `solver` from now on. A channel whose value is a view on the solver's state vector (angles,
-        rates) is current after every step without a snapshot: it is kept and read directly."""
+        rates) is current after every step without a snapshot: it is kept and read directly. A new solver's
+        scene also says which turns the inputs may ask for (plane_normal, input_bounds)."""
+        if solver is not self.solver:
+            n = solver.model.plane_normal(solver.scene.excitation) if solver is not None else None
+            self.plane_normal = None if n is None else tuple(float(c) for c in n)
+            self.input_bounds = self._input_bounds()
         self.solver = solver
         self._views = {}
         if solver is not None:
@@ -233,7 +323,7 @@ class FmuCore:
                 raise StateError(f"FMU state: {problem}")
         solver = self.solver
         if state["solver"] is not None:
-            solver = solver or Solver(self.scene_from_parameters(), max_steps=STEP_BUDGET)
+            solver = solver or Solver(self.scene_from_parameters(), max_steps=STEP_BUDGET, turning=True)
             solver.set_state(state["solver"])  # refuses before anything changes
         self._use(solver if state["solver"] is not None else None)
         self.values.clear()  # in place: the FMI variables' getters and setters hold this dict

@@ -12,6 +12,8 @@ from grapefmu.model.model import Model
 from grapefmu.results.catalogue import CHANNELS, PER_PAIR_LIMIT, Channel
 
 OUTPUT_SETS = ("full", "summary")
+#: the rachis' initial orientation as parameters: fixed-axis roll, pitch, yaw (REP-103, R = Rz(yaw) Ry(pitch) Rx(roll))
+ORIENTATION = ("rachis_roll", "rachis_pitch", "rachis_yaw")
 
 
 @dataclass(frozen=True)
@@ -70,6 +72,8 @@ def variables(model: Model, outputs: str = "full") -> list[Var]:
               "Contact damping: c in N.s/m (kelvin-voigt) or chi (hunt-crossley); 0 when restitution sets it"),
           Var("restitution", "real", "parameter", "1",
               "Target coefficient of restitution; > 0 calibrates the contact damping (contact_damping must be 0)"),
+          *(Var(name, "real", "parameter", "rad", f"Rachis (gripper) initial {what} about the world {axis} axis "
+                "(fixed axes, REP-103)") for name, what, axis in zip(ORIENTATION, ("roll", "pitch", "yaw"), "xyz")),
           Var("gravity", "real", "parameter", "m/s2", "Gravitational acceleration"),
           Var("rtol", "real", "parameter", "1", "Relative tolerance of the event-driven solver")]
     return v

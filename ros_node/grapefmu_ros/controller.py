@@ -12,6 +12,7 @@ import argparse
 import signal
 import sys
 
+import numpy as np
 import rclpy
 import rclpy.executors
 from geometry_msgs.msg import AccelStamped
@@ -22,12 +23,12 @@ from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from grapefmu_msgs.msg import CollisionEvent, PedicelTension, Summary
 
-from builtin_interfaces.msg import Time
-
 from grapefmu.model.excitation import pick_and_place
 from grapefmu.physics.excitation import accel
+from grapefmu.recording import messages as msgs
 from grapefmu.recording.messages import NAMESPACE
-from grapefmu.recording.stamps import split, to_ns
+from grapefmu.recording.stamps import to_ns
+from grapefmu.recording.typestore import serialize
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
 MOVES = [((0.0, 0.10), 0.4), ((0.30, 0.0), 0.6), ((0.0, -0.10), 0.4)]
@@ -112,13 +113,8 @@ class HarvestController(Node):
             # fall fast, recover slowly: 20 ms and 200 ms time constants
             tau = 0.02 if target < self.rate else 0.2
             self.rate += (target - self.rate) * min(1.0, self.dt / tau)
-        a = accel(self.profile, self.s) * self.rate**2 if self.s < self.t_move_end else (0.0, 0.0)
-        msg = AccelStamped()
-        sec, nanosec = split(to_ns(t))
-        msg.header.stamp = Time(sec=sec, nanosec=nanosec)
-        msg.header.frame_id = "rachis"
-        msg.accel.linear.x, msg.accel.linear.z = float(a[0]), float(a[1])
-        self.pub.publish(msg)
+        a = accel(self.profile, self.s) * self.rate**2 if self.s < self.t_move_end else np.zeros(6)
+        self.pub.publish(serialize(msgs.accel(to_ns(t), a)[1]))  # world frame, the node's own message builder
         self.sent_t = t
         self.s += self.dt * (self.rate if self.mode == "gentle" else 1.0)
         self.next_t = round(t + self.dt, 9)

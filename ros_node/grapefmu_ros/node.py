@@ -2,10 +2,14 @@
 
 Real-time mode: a timer at `rate_hz` integrates exactly the simulated time that should have passed by
 the wall clock (scaled by `real_time_factor`), so a late tick integrates a longer interval and the run
-never drifts. Lockstep mode: each `rachis/accel` message advances the simulation to its stamp with the
-previous acceleration held, then holds the new one; the node publishes `/clock` for `use_sim_time`.
-Either way every interval integrated is recorded as `rachis/accel_applied` (stamp = interval end), which
-is what `grapefmu replay --check` needs to reproduce the run exactly."""
+never drifts. Lockstep mode: each input message advances the simulation to its stamp with the previous
+input held, then holds the new one; the node publishes `/clock` for `use_sim_time`.
+
+Inputs give the gripper's full motion in the world frame: `rachis/accel` its linear and angular acceleration,
+`rachis/twist` its velocities (differentiated; the angular velocity is also set at the start of the next
+interval), `rachis/pose` or a TF frame its pose (differentiated twice). Every interval integrated is recorded
+as `rachis/accel_applied` (stamp = interval end), and the angular velocity an input set at its start as
+`rachis/twist_applied`: what `grapefmu replay --check` needs to reproduce the run exactly."""
 from __future__ import annotations
 
 import collections
@@ -19,11 +23,13 @@ from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from scipy.spatial.transform import Rotation
 from std_srvs.srv import SetBool, Trigger
 
 from grapefmu import GrapefmuError, Solver, load_scene
+from grapefmu.model.model import off_axis
 from grapefmu.scenefile import default_scene_path
-from grapefmu.solver.solver import MAX_ACCEL
+from grapefmu.model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from grapefmu.solver.warmup import notice
 from grapefmu.recording import messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
@@ -51,17 +57,32 @@ PARAMETERS = [
     ("mode", "realtime", "realtime (wall-clock locked timer) or lockstep (advance to each input stamp)", None, True),
     ("rate_hz", 1000.0, "Real-time mode: simulation and joint_states rate, Hz", (1, 10000), True),
     ("real_time_factor", 1.0, "Simulated seconds per wall second in real-time mode", (0.01, 100), False),
-    ("max_accel", MAX_ACCEL, "Inputs above this acceleration (m/s²) are rejected (at most the solver's own bound)",
-     (0, MAX_ACCEL), False),
+    ("max_accel", MAX_ACCEL, "Inputs whose linear acceleration exceeds this magnitude (m/s²) are rejected (at most "
+     "the solver's own bound)", (0, MAX_ACCEL), False),
+    ("max_angular_accel", MAX_ANGULAR_ACCEL, "Inputs whose angular acceleration exceeds this magnitude (rad/s²) are "
+     "rejected (at most the solver's own bound)", (0, MAX_ANGULAR_ACCEL), False),
     ("marker_rate_hz", 30.0, "MarkerArray rate, Hz (0: none)", (0, 1000), False),
     ("tf_rate_hz", 100.0, "/tf rate, Hz (TF listeners interpolate between transforms)", (1, 10000), False),
     ("pose_filter_hz", 20.0, "Low-pass cutoff for accelerations differentiated from rachis/pose, rachis/twist or "
      "the gripper's TF frame, Hz", (0.1, 1000),
      False),
     ("record", "", "MCAP file to record every topic to ('' for none)", None, True),
-    ("gripper_frame", "", "TF frame of the gripper holding the rachis, looked up on /tf against `world` ('' for "
-     "none: inputs come on rachis/accel, rachis/pose or rachis/twist)", None, True),
+    ("gripper_frame", "", "TF frame of the gripper holding the rachis, read on /tf as the transform world → it, "
+     "rotation included ('' for none: inputs come on rachis/accel, rachis/pose or rachis/twist)", None, True),
 ]
+
+
+#: rad: a pose input this far from the simulated rachis' orientation is warned about
+ORIENTATION_WARNING = 0.1
+
+
+def _difference(a: np.ndarray, b: np.ndarray, order: int) -> np.ndarray:
+    """b − a of two motion samples: velocities (order 1) subtract; poses (order 2: position, quaternion x, y, z, w)
+    give the displacement and the rotation vector of the turn from a to b in the world frame (R_b R_aᵀ)."""
+    if order == 1:
+        return b - a
+    turn = Rotation.from_quat(b[3:]) * Rotation.from_quat(a[3:]).inv()
+    return np.concatenate([b[:3] - a[:3], turn.as_rotvec()])
 
 
 def usage() -> str:
@@ -99,8 +120,8 @@ class SimulatorNode(Node):
         self.recorder = McapRecorder(gp("record"), metadata(self.scene, self.mode, self.rate, ns)) \
             if gp("record") else None
         topics = ["joint_states", "pedicel_tension", *msgs.wrench_topics(m), "contacts", "summary", "collision_events",
-                  "markers", "/diagnostics", "rachis/accel_applied", "sim_time", "/tf", "/tf_static",
-                  "robot_description"] + (["/clock"] if self.mode == "lockstep" else [])
+                  "markers", "/diagnostics", "rachis/accel_applied", "rachis/twist_applied", "sim_time", "/tf",
+                  "/tf_static", "robot_description"] + (["/clock"] if self.mode == "lockstep" else [])
         # no per-publisher QoS-event handlers: rclpy's executor walks every one of them on every spin, which cost
         # more than the simulation at 1 kHz (incompatible subscribers still get the middleware's own warning)
         quiet = PublisherEventCallbacks(use_default_callbacks=False)
@@ -111,6 +132,9 @@ class SimulatorNode(Node):
                                ("rachis/twist", self.on_twist)):
             self.create_subscription(message_class(msgs.topic_type(topic)), topic, handler, INPUT_QOS, raw=True)
         self.gripper_frame = gp("gripper_frame")
+        self.rachis_frame = f"{self.prefix}rachis"
+        #: a planar scene's rachis turns about its y axis only: this world direction (None: spherical berries only)
+        self.plane_normal = m.plane_normal(self.scene.excitation)
         if self.gripper_frame:
             self.create_subscription(message_class(msgs.topic_type("/tf")), "/tf", self.on_tf, INPUT_QOS, raw=True)
         self.create_service(Trigger, "reset", self.on_reset)
@@ -137,14 +161,17 @@ class SimulatorNode(Node):
         self.origin = 0 if self.mode == "lockstep" else self.get_clock().now().nanoseconds - to_ns(self.solver.t)
 
     def _reset_sim(self):
-        self.solver = Solver(self.scene)
-        self.accel = (0.0, 0.0)
+        self.solver = Solver(self.scene, turning=True)  # whatever the scene does, inputs may turn the rachis
+        self.accel = (0.0,) * 6  # held: ACCEL_COMPONENTS, world frame
+        self.omega = None        # ω (world, rad/s) an input gave, set at the start of the next interval
         self.last_stamp = -math.inf
+        self.accel_stamp = -math.inf  # of the last rachis/accel: its acceleration wins over a motion input's there
+        self.orientation_offset = math.nan  # rad, between the last pose input's orientation and the rachis'
         self._restart_clock()
         self.last_tick = None
         self._last = {}  # rate parameter -> simulated time its topic was last published
         self._motion = {2: [], 1: []}  # the last poses (order 2) and velocities (order 1) received
-        self._motion_acc = np.zeros(2)
+        self._motion_acc = np.zeros(6)
         stamp = self._stamp(self.solver.t)
         for topic, m in msgs.tf_static(self.scene.model, stamp, self.prefix):
             self.emit(topic, m, stamp)
@@ -155,13 +182,16 @@ class SimulatorNode(Node):
         if dt <= 0:
             return True
         try:
-            self.solver.advance(dt, self.accel)
+            self.solver.advance(dt, self.accel, self.omega)
         except GrapefmuError as e:
             self.failures += 1
             self.get_logger().error(f"step of {dt:.6g} s refused: {e}", throttle_duration_sec=1.0)
             return False
         ns = self._stamp(self.solver.t)
-        self.emit(*msgs.accel(ns, self.accel, "rachis/accel_applied", self.prefix), ns)
+        self.emit(*msgs.accel(ns, self.accel, "rachis/accel_applied"), ns)
+        if self.omega is not None:  # set at this interval's start, once
+            self.emit(*msgs.twist(ns, self.omega, "rachis/twist_applied"), ns)
+            self.omega = None
         self.emit("sim_time", msgs.clock(to_ns(self.solver.t))[1], ns)  # what replay --check re-simulates
         self.publish_state()
         for ns, topic, m in msgs.impact_messages(self.scene.model, self.solver.take_impacts(), self.origin,
@@ -198,14 +228,43 @@ class SimulatorNode(Node):
             self.recorder.write(self.full_names[topic], message.__msgtype__, data, ns)
 
     # --- inputs ---------------------------------------------------------------------------------
-    def _valid(self, ax, az, what) -> bool:
-        bound = self.get_parameter("max_accel").value
-        if not (math.isfinite(ax) and math.isfinite(az) and abs(ax) <= bound and abs(az) <= bound):
-            self.rejected += 1
-            self.get_logger().warning(f"{what}: acceleration ({ax!r}, {az!r}) m/s² rejected: must be finite and "
-                                      f"within ±{bound:g} m/s²", throttle_duration_sec=1.0)
-            return False
-        return True
+    def _reject(self, what: str, why: str) -> None:
+        self.rejected += 1
+        self.get_logger().warning(f"{what}: {why}; rejected", throttle_duration_sec=1.0)
+
+    def _frame(self, frame_id: str, what: str, allowed: tuple[str, ...]) -> str | None:
+        """`world` (also for an empty frame_id) or the rachis frame, if `allowed`; None (rejected) otherwise."""
+        frame = {"": "world", msgs.WORLD: "world", self.rachis_frame: "rachis"}.get(frame_id)
+        if frame not in allowed:
+            known = " or ".join(repr(f) for f in ((msgs.WORLD, self.rachis_frame) if "rachis" in allowed
+                                                 else (msgs.WORLD,)))
+            self._reject(what, f"frame_id {frame_id!r}: expected {known} (the node looks up no other frame)")
+            return None
+        return frame
+
+    def _valid(self, a, omega, what, frame="world") -> bool:
+        """Finite, within max_accel and max_angular_accel (magnitudes, so in any frame), ω within the solver's
+        bound, and in a planar scene no turn about any axis but the rachis' y axis (the model's own test)."""
+        lin, ang = math.hypot(*a[:3]), math.hypot(*a[3:])
+        w = (0.0, 0.0, 0.0) if omega is None else omega
+        bound, angular_bound = self.get_parameter("max_accel").value, self.get_parameter("max_angular_accel").value
+        axis = self.plane_normal if self.plane_normal is None or frame == "world" else (0.0, 1.0, 0.0)
+        if not all(math.isfinite(v) for v in (*a, *w)):
+            why = "values must be finite"
+        elif lin > bound:
+            why = f"linear acceleration |a| = {lin:.6g} m/s² above max_accel = {bound:g}"
+        elif ang > angular_bound:
+            why = f"angular acceleration |α| = {ang:.6g} rad/s² above max_angular_accel = {angular_bound:g}"
+        elif math.hypot(*w) > MAX_ANGULAR_VELOCITY:
+            why = f"angular velocity |ω| = {math.hypot(*w):.6g} rad/s above {MAX_ANGULAR_VELOCITY:g}"
+        elif axis is not None and (any(a[3:]) or any(w)) and (off_axis(a[3:], axis) or off_axis(w, axis)):
+            why = (f"the scene has planar berries, which swing in the rachis' x–z plane: the rachis may turn only "
+                   f"about its y axis ({', '.join(f'{c:.6g}' for c in axis)} in {frame}); got α = {tuple(a[3:])} "
+                   f"rad/s², ω = {tuple(w)} rad/s (a scene of spherical berries follows any rotation)")
+        else:
+            return True
+        self._reject(what, why)
+        return False
 
     def _received(self, topic: str, data: bytes):
         """Decode an input through the typestore and record it (re-serialized: the one type system)."""
@@ -218,62 +277,110 @@ class SimulatorNode(Node):
 
     def on_accel(self, data: bytes):
         msg, t_in = self._received("rachis/accel", data)
-        self._input(msg.accel.linear.x, msg.accel.linear.z, t_in, "rachis/accel")
+        frame = self._frame(msg.header.frame_id, "rachis/accel", ("world", "rachis"))
+        if frame:
+            a = msg.accel
+            self._input(t_in, (a.linear.x, a.linear.y, a.linear.z, a.angular.x, a.angular.y, a.angular.z),
+                        "rachis/accel", frame=frame, explicit=True)
 
-    def _input(self, ax, az, t_in, what):
-        if not self._valid(ax, az, what):
-            return
+    def _input(self, t_in, a, what, omega=None, frame="world", explicit=False) -> bool:
+        """Advance to t_in (lockstep) with the input held so far, then hold `a` (ACCEL_COMPONENTS) and set ω at the
+        next interval's start (if given). An input in the rachis frame is turned into the world frame with the
+        rachis' orientation when it starts to act; the world-frame value is held, and recorded. An explicit
+        acceleration (rachis/accel) wins over one derived from a motion input with the same stamp."""
+        if not self._valid(a, omega, what, frame):
+            return False
         if t_in < self.last_stamp:
-            self.rejected += 1
-            self.get_logger().warning(f"{what}: stamp {t_in:.9f} s goes back before {self.last_stamp:.9f} s; rejected",
-                                      throttle_duration_sec=1.0)
-            return
+            self._reject(what, f"stamp {t_in:.9f} s goes back before {self.last_stamp:.9f} s")
+            return False
         self.last_stamp = t_in
         if self.mode == "lockstep" and not self.paused:
             if t_in > self.solver.t:
                 if not self.advance(t_in - self.solver.t):
-                    return
+                    return False
             else:
                 self.publish_state()  # an input at the current time still gets its answer
-        self.accel = (float(ax), float(az))
+        if frame == "rachis":
+            turn = Rotation.from_quat(self.solver.snapshot().base_orientation[0])
+            a = (*turn.apply(a[:3]), *turn.apply(a[3:]))
+        if explicit or t_in != self.accel_stamp:
+            self.accel = tuple(float(v) for v in a)
+        if explicit:
+            self.accel_stamp = t_in
+        if omega is not None:
+            self.omega = tuple(float(v) for v in omega)
+        return True
 
     def on_pose(self, data: bytes):
         msg, t = self._received("rachis/pose", data)
-        self._motion_input(t, np.array([msg.pose.position.x, msg.pose.position.z]), 2, "rachis/pose")
+        if self._frame(msg.header.frame_id, "rachis/pose", ("world",)):
+            p, q = msg.pose.position, msg.pose.orientation
+            self._pose_input(t, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), "rachis/pose")
 
     def on_twist(self, data: bytes):
         msg, t = self._received("rachis/twist", data)
-        self._motion_input(t, np.array([msg.twist.linear.x, msg.twist.linear.z]), 1, "rachis/twist")
+        if self._frame(msg.header.frame_id, "rachis/twist", ("world",)):
+            v, w = msg.twist.linear, msg.twist.angular
+            self._motion_input(t, np.array([v.x, v.y, v.z, w.x, w.y, w.z]), 1, "rachis/twist")
 
     def on_tf(self, data: bytes):
         """The gripper frame's pose in `world`, from another node's /tf (this node's own frames are skipped)."""
         msg = deserialize(data, msgs.topic_type("/tf"))
         for tr in msg.transforms:
-            if tr.child_frame_id == self.gripper_frame and tr.header.frame_id == msgs.WORLD:
-                t = stamp_seconds(tr.header.stamp.sec, tr.header.stamp.nanosec)
-                if self.recorder:
-                    self.recorder.write("/tf", msg.__msgtype__, data, to_ns(max(t, 0.0)))
-                p = tr.transform.translation
-                self._motion_input(t, np.array([p.x, p.z]), 2, f"/tf {self.gripper_frame}")
+            if tr.child_frame_id != self.gripper_frame:
+                continue
+            what = f"/tf {self.gripper_frame}"
+            if tr.header.frame_id != msgs.WORLD:
+                self._reject(what, f"given in {tr.header.frame_id!r}; the node reads the transform {msgs.WORLD} → "
+                                   f"{self.gripper_frame} only (it composes no TF chain: publish that transform, or "
+                                   f"the gripper's pose on rachis/pose)")
+                continue
+            t = stamp_seconds(tr.header.stamp.sec, tr.header.stamp.nanosec)
+            if self.recorder:
+                self.recorder.write("/tf", msg.__msgtype__, data, to_ns(max(t, 0.0)))
+            p, q = tr.transform.translation, tr.transform.rotation
+            self._pose_input(t, (p.x, p.y, p.z), (q.x, q.y, q.z, q.w), what)
 
-    def _motion_input(self, t: float, x: np.ndarray, order: int, what: str):
-        """Acceleration from the gripper's positions (order 2: second difference) or velocities (order 1:
-        first difference), then a first-order low-pass at pose_filter_hz."""
+    def _pose_input(self, t: float, position, quaternion, what: str):
+        """A pose (world): differentiated twice; then how far the rachis' orientation is from it."""
+        norm = math.sqrt(sum(c * c for c in quaternion))
+        if not abs(norm - 1.0) < 1e-3:
+            self._reject(what, f"orientation {tuple(quaternion)} is not a unit quaternion (norm {norm:.6g})")
+            return
+        q = np.array(quaternion) / norm
+        if not self._motion_input(t, np.array([*position, *q]), 2, what):
+            return
+        here = self.solver.snapshot().base_orientation[0]
+        self.orientation_offset = 2.0 * math.acos(min(1.0, abs(float(np.dot(q, here / np.linalg.norm(here))))))
+        if self.orientation_offset > ORIENTATION_WARNING:
+            self.get_logger().warning(
+                f"{what}: the simulated rachis is turned {self.orientation_offset:.3g} rad from the gripper's pose "
+                f"at {t:.6f} s, and gravity acts on the berries at the simulated orientation: start the scene at the "
+                "gripper's orientation (excitation.orientation), or raise pose_filter_hz if the filter's lag is the "
+                "cause",
+                throttle_duration_sec=5.0)
+
+    def _motion_input(self, t: float, x: np.ndarray, order: int, what: str) -> bool:
+        """(a, α) from the gripper's poses (order 2: x = position, quaternion; second difference) or velocities
+        (order 1: x = linear, angular velocity; first difference, and ω set at the next interval's start), then a
+        first-order low-pass at pose_filter_hz. Turns are differenced as rotation vectors in the world frame.
+        False if the input was rejected."""
         if not np.all(np.isfinite(x)):
-            self._valid(math.nan, math.nan, what)
-            return
+            self._reject(what, "values must be finite")
+            return False
         seen = self._motion[order] = (self._motion[order] + [(t, x)])[-(order + 1):]
-        if len(seen) <= order:
-            return
+        omega = tuple(x[3:]) if order == 1 else None
+        if len(seen) <= order:  # no difference yet: advance to the stamp holding what is held (and set ω)
+            return self._input(t, self.accel, what, omega=omega)
         times = [s[0] for s in seen]
         if not all(a < b for a, b in zip(times, times[1:])):
-            self._valid(math.nan, math.nan, f"{what} (stamps must increase)")
-            return
-        rates = [(b - a) / (tb - ta) for (ta, a), (tb, b) in zip(seen, seen[1:])]
+            self._reject(what, "stamps must increase")
+            return False
+        rates = [_difference(a, b, order) / (tb - ta) for (ta, a), (tb, b) in zip(seen, seen[1:])]
         raw = rates[0] if order == 1 else (rates[1] - rates[0]) / (0.5 * (times[2] - times[0]))
         alpha = 1.0 - math.exp(-2 * math.pi * self.get_parameter("pose_filter_hz").value * (times[-1] - times[-2]))
         self._motion_acc += alpha * (raw - self._motion_acc)
-        self._input(self._motion_acc[0], self._motion_acc[1], t, what)
+        return self._input(t, tuple(self._motion_acc), what, omega=omega)
 
     # --- real time ------------------------------------------------------------------------------
     def on_tick(self):
@@ -316,6 +423,8 @@ class SimulatorNode(Node):
             "sim_time_s": f"{t:.6f}", "real_time_factor": f"{(t - sim_prev) / max(now - wall_prev, 1e-9):.4f}",
             "cpu_percent": f"{100 * (cpu - cpu_prev) / max(now - wall_prev, 1e-9):.1f}", "overruns": self.overruns,
             "rejected_inputs": self.rejected, "refused_steps": self.failures, **summary,
+            **({} if math.isnan(self.orientation_offset) else
+               {"gripper_orientation_offset_rad": f"{self.orientation_offset:.6f}"}),
             "zeno_guard_activations": self.solver.stats["zeno_guard_activations"], "paused": self.paused,
             "mode": self.mode,
             **({f"tick_cost_ms_{k}": f"{1e3 * v:.3f}" for k, v in

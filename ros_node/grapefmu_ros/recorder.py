@@ -42,5 +42,5 @@ class McapRecorder:
 def metadata(scene, mode: str, rate_hz: float, namespace: str) -> dict[str, str]:
     s = scene.solver
     return {"grapefmu_version": __version__, "scene_name": scene.name, "scene_toml": scene.source,
-            "method": "event", "input_source": "applied", "node_mode": mode, "namespace": namespace,
+            "method": "event", "input_source": "applied", "turning": "true", "node_mode": mode, "namespace": namespace,
             "solver": json.dumps({"rtol": s.rtol, "atol": s.atol, "rate_hz": rate_hz})}

@@ -39,7 +39,7 @@ from ..physics.dynamics import rhs
 from ..physics.excitation import held
 from ..physics.forces import CONTACT, active
 from ..physics.kinematics import pair_state, workspace
-from ..physics.layout import initial, model_head
+from ..physics.layout import initial, model_head, layout_of
 from ..solver.events import classify, event_value, watched
 from ..solver.reference import MAX_SEGMENTS, TRANSITION
 from ..solver.session import Session, SessionType
@@ -162,7 +162,7 @@ def simulate_lean(scene: Scene, *, rtol: float, atol: float, integrator: str = "
     floats[SKIN] = float(np.mean([b.radius for b in m.berries])) if skin is None else skin
     watch_all = skin is None and npair <= WATCH_ALL
     counts = np.zeros(3, dtype=np.int64)
-    y = initial(scene.layout, scene)
+    y = initial(layout_of(scene), scene)
     events = np.zeros((2 * npair, 2), np.int64)  # (pair, function) of each event; the session shares the arrays
     s: Session = _session(M, X, held(on=False), W, C, np.zeros(npair, np.int64), events, np.zeros(2 * npair),
                           np.zeros(npair, np.int64), floats, counts, np.zeros_like(y))

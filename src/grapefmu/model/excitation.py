@@ -21,6 +21,10 @@ from ..errors import SceneError
 
 CONSTANT, CHIRP, TABLE = 0, 1, 2
 
+#: the largest rachis motion any scene or face accepts (beyond any gripper or robot wrist, so a unit mistake):
+#: linear acceleration m/s² (about 100 g), angular acceleration rad/s², angular velocity rad/s (about 1000 rpm)
+MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY = 1e3, 1e4, 1e2
+
 
 class ExcitationArrays(NamedTuple):
     """What the compiled core reads: kind code, parameters, table rows (t, a_x, a_y, a_z, α_x, α_y, α_z),
@@ -220,12 +224,8 @@ def read_csv(path: Path, key: str, hold: bool = False, after: str | None = None)
 #: quaternion
 POSE_COLUMNS = ("time", "x", "y", "z")
 ORIENTATIONS = (("roll", "pitch", "yaw"), ("qx", "qy", "qz", "qw"))
-#: the largest acceleration a pose table may ask for, m/s² (beyond it the positions jump: a unit or a glitch)
-POSE_MAX_ACCEL = 1e3
 
 
-#: the largest angular acceleration a pose table may ask for, rad/s² (beyond it the orientations jump)
-POSE_MAX_ALPHA = 1e4
 #: sub-intervals per row interval of a pose table that turns about a moving axis (its α is not piecewise linear
 #: there, and the compiled table is): benchmarks/pose_table_error.py gives the error this leaves
 POSE_TURN_SUBDIVISION = 4
@@ -287,9 +287,9 @@ def read_pose_table(path: Path, key: str) -> Excitation:
     spline = CubicSpline(t, arr[:, 1:4], bc_type="clamped")
     accel = spline(t, 2)
     worst = int(np.argmax(np.abs(accel).max(axis=1)))
-    if np.abs(accel[worst]).max() > POSE_MAX_ACCEL:
+    if np.abs(accel[worst]).max() > MAX_ACCEL:
         raise SceneError(key, f"{path} row {worst + 1} columns x, y, z: following these positions needs "
-                              f"{np.abs(accel[worst]).max():.3g} m/s² (more than {POSE_MAX_ACCEL:g}): a jump the "
+                              f"{np.abs(accel[worst]).max():.3g} m/s² (more than {MAX_ACCEL:g}): a jump the "
                               "interpolation cannot follow (a glitch, or positions in mm?)")
     turn = CubicSpline(t, phi, bc_type="clamped")
     axis = phi[np.argmax(np.linalg.norm(phi, axis=1))]
@@ -298,10 +298,10 @@ def read_pose_table(path: Path, key: str) -> Excitation:
         [np.linspace(a, b, POSE_TURN_SUBDIVISION, endpoint=False) for a, b in zip(t[:-1], t[1:])] + [t[-1:]])
     alpha = _angular_accel(turn, rot[0], knots)
     worst = int(np.argmax(np.abs(alpha).max(axis=1)))
-    if np.abs(alpha[worst]).max() > POSE_MAX_ALPHA:
+    if np.abs(alpha[worst]).max() > MAX_ANGULAR_ACCEL:
         row = int(np.searchsorted(t, knots[worst], side="right"))
         raise SceneError(key, f"{path} row {row} columns {', '.join(orientation)}: following these orientations needs "
-                              f"{np.abs(alpha[worst]).max():.3g} rad/s² (more than {POSE_MAX_ALPHA:g}): a jump the "
+                              f"{np.abs(alpha[worst]).max():.3g} rad/s² (more than {MAX_ANGULAR_ACCEL:g}): a jump the "
                               "interpolation cannot follow (a glitch, or angles in degrees?)")
     desc = (f"pose table: {path.name}, {len(t)} poses from {t[0]:g} to {t[-1]:g} s, cubic splines of position and "
             f"rotation vector{'' if fixed_axis else f' (α at {POSE_TURN_SUBDIVISION} points per row)'}")

@@ -80,6 +80,12 @@ def model_head(M):
     return model_offsets(M)[4]
 
 
+def layout_of(scene) -> Layout:
+    """The layout of a scene's runs: with the rachis' ω and orientation when it may turn (Excitation.turns)."""
+    m = scene.model
+    return layout(m.n_berries, m.n_dof, len(m.couplings), scene.excitation.turns)
+
+
 def initial(lay: Layout, scene, extra: int = 0) -> np.ndarray:
     """y at a scene's start (with `extra` trailing zeros): its angles and rates, the rachis at the world origin at
     rest in translation, in its initial orientation and angular velocity, every energy integral zero."""

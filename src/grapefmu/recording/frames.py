@@ -40,6 +40,12 @@ def quaternion_z_to(v: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
+def compose(q_a, q_b) -> np.ndarray:
+    """(x, y, z, w) of R_a R_b: the turn q_b, then q_a (both quaternions x, y, z, w)."""
+    from scipy.spatial.transform import Rotation
+    return (Rotation.from_quat(q_a) * Rotation.from_quat(q_b)).as_quat()
+
+
 def static_transforms(model: Model, prefix: str = PREFIX) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
     """(parent, child, translation, quaternion xyzw) of every transform that never changes."""
     return [(rachis(prefix), f"{prefix}{name}_hinge", h, np.array([0.0, 0.0, 0.0, 1.0]))

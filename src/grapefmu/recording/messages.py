@@ -11,7 +11,10 @@ serialize through the one typestore (typestore.py). Topics (relative to the node
   contacts                   grapefmu_msgs/Contacts       both bodies, point, normal, depth and force of each contact
   summary                    grapefmu_msgs/Summary        simulated time and the catalogue's summary channels, named
   collision_events           grapefmu_msgs/CollisionEvent one message per finished impact
-  rachis/accel               geometry_msgs/AccelStamped   the rachis acceleration, linear and angular, world frame
+  rachis/accel_applied       geometry_msgs/AccelStamped   the rachis acceleration held over the interval ending at the
+                                                          stamp, linear (m/s²) and angular (rad/s²), world frame
+  rachis/twist_applied       geometry_msgs/TwistStamped   the rachis' angular velocity (rad/s, world) set at the start
+                                                          of that interval (the node, only when an input set it)
   markers                    visualization_msgs/MarkerArray  rachis, twigs, berries and contact forces, frame `world`
   /tf, /tf_static            tf2_msgs/TFMessage           world → rachis → berries and hinges (frames.py)
   robot_description          std_msgs/String              URDF of the cluster, consistent with /tf
@@ -37,7 +40,8 @@ TOPIC_TYPES = {
     "joint_states": "sensor_msgs/msg/JointState", "pedicel_tension": "grapefmu_msgs/msg/PedicelTension",
     "contacts": "grapefmu_msgs/msg/Contacts", "summary": "grapefmu_msgs/msg/Summary",
     "collision_events": "grapefmu_msgs/msg/CollisionEvent", "rachis/accel": "geometry_msgs/msg/AccelStamped",
-    "rachis/accel_applied": "geometry_msgs/msg/AccelStamped", "markers": "visualization_msgs/msg/MarkerArray",
+    "rachis/accel_applied": "geometry_msgs/msg/AccelStamped", "rachis/twist_applied": "geometry_msgs/msg/TwistStamped",
+    "markers": "visualization_msgs/msg/MarkerArray",
     "/clock": "rosgraph_msgs/msg/Clock", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
     "rachis/pose": "geometry_msgs/msg/PoseStamped", "rachis/twist": "geometry_msgs/msg/TwistStamped",
     "/tf": "tf2_msgs/msg/TFMessage",
@@ -104,11 +108,20 @@ def _summary(ns: int, frame: str, row) -> object:
     return msg("grapefmu_msgs/msg/Summary", header=header(ns, frame), **fields)
 
 
-def accel(ns: int, a, topic: str = "rachis/accel", prefix: str = frames.PREFIX):
-    """The rachis acceleration a (ACCEL_COMPONENTS, world frame): linear and angular parts."""
-    return topic, msg("geometry_msgs/msg/AccelStamped", header=header(ns, frames.WORLD),
-                      accel={"linear": {"x": float(a[0]), "y": float(a[1]), "z": float(a[2])},
-                             "angular": {"x": float(a[3]), "y": float(a[4]), "z": float(a[5])}})
+def _vector(v) -> dict:
+    return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
+
+
+def accel(ns: int, a, topic: str = "rachis/accel", frame: str = frames.WORLD):
+    """The rachis acceleration a (ACCEL_COMPONENTS: linear, then angular) as an AccelStamped in `frame`."""
+    return topic, msg("geometry_msgs/msg/AccelStamped", header=header(ns, frame),
+                      accel={"linear": _vector(a[:3]), "angular": _vector(a[3:6])})
+
+
+def twist(ns: int, angular, topic: str = "rachis/twist", frame: str = frames.WORLD, linear=(0.0, 0.0, 0.0)):
+    """The rachis' angular velocity (and linear velocity, m/s) as a TwistStamped in `frame`."""
+    return topic, msg("geometry_msgs/msg/TwistStamped", header=header(ns, frame),
+                      twist={"linear": _vector(linear), "angular": _vector(angular)})
 
 
 def clock(ns: int):
@@ -190,16 +203,15 @@ def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_
     Foxglove or RViz: three line lists plus one sphere per berry, however many pairs the cluster has."""
     M = model.arrays
     rachis = np.column_stack([M.berry["hinge_x"], M.berry["hinge_y"], M.berry["hinge_z"]])
-    frame = snap._replace(base_displacement=snap.base_displacement[k: k + 1])
+    frame = snap._replace(base_displacement=snap.base_displacement[k: k + 1],
+                          base_orientation=snap.base_orientation[k: k + 1])
     origin, *hinges = catalogue.world(frame, np.vstack([np.zeros(3), rachis])[None])[0]
     berries = catalogue.world(frame, snap.observation.position[k: k + 1])[0]
 
-    def pt(v):
-        return {"x": float(v[0]), "y": float(v[1]), "z": float(v[2])}
-
     def marker(mid, mtype, ns_, scale, color, points=(), pose=None):
         return msg("visualization_msgs/msg/Marker", header=header(ns, WORLD), ns=ns_, id=mid, type=mtype, action=0,
-                   pose=pose or {"orientation": {"w": 1.0}}, scale=scale, color=color, points=[pt(p) for p in points])
+                   pose=pose or {"orientation": {"w": 1.0}}, scale=scale, color=color,
+                   points=[_vector(p) for p in points])
     line = 5  # LINE_LIST
     force = snap.observation.contact_force[k]
     normal = snap.observation.contact_normal[k]
@@ -214,7 +226,8 @@ def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_
            marker(2, line, "contact", {"x": 0.002}, {"r": 0.9, "g": 0.2, "b": 0.1, "a": 1.0}, contact_pts)]
     for i, (b, r) in enumerate(zip(berries, M.berry["radius"])):
         arr.append(marker(10 + i, 2, "berries", {"x": 2 * r, "y": 2 * r, "z": 2 * r},
-                          {"r": 0.45, "g": 0.1, "b": 0.5, "a": 0.9}, pose={"position": pt(b), "orientation": {"w": 1.0}}))
+                          {"r": 0.45, "g": 0.1, "b": 0.5, "a": 0.9},
+                          pose={"position": _vector(b), "orientation": {"w": 1.0}}))
     for k_, o in enumerate(model.obstacles):
         mtype, scale = _obstacle_shape(o)
         arr.append(marker(100000 + k_, mtype, "obstacles", scale, {"r": 0.6, "g": 0.6, "b": 0.6, "a": 0.4},
@@ -240,8 +253,9 @@ def _obstacle_pose(o, frame: catalogue.Snapshot) -> dict:
         q = np.array([0.0, 0.0, np.sin(o.yaw / 2), np.cos(o.yaw / 2)])
     else:
         q = frames.quaternion_z_to(np.subtract(o.end, o.point))
-    if o.attached:
+    if o.attached:  # carried, and turned, with the rachis
         centre = catalogue.world(frame, centre[None, None])[0, 0]
+        q = frames.compose(frame.base_orientation[0], q)
     return {"position": dict(zip("xyz", map(float, centre))), "orientation": dict(zip("xyzw", map(float, q)))}
 
 

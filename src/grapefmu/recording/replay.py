@@ -2,7 +2,8 @@
 
 A recording from `grapefmu simulate` is re-simulated from the scene and solver settings in its metadata;
 one from the ROS node is re-simulated from `rachis/accel_applied`, the exact intervals and held
-accelerations the node integrated. Either way the recorded joint states are compared with the new run,
+accelerations (linear and angular) the node integrated, with the angular velocity it set at an interval's start
+from `rachis/twist_applied`. Either way the recorded joint states are compared with the new run,
 and a deviation above TOLERANCE fails the check.
 
 Reading tells two kinds of damage apart (`read_recording`):
@@ -14,6 +15,7 @@ Reading tells two kinds of damage apart (`read_recording`):
   one line naming the record (byte offset, topic, log time)."""
 from __future__ import annotations
 
+import bisect
 import io
 import json
 import math
@@ -37,6 +39,8 @@ class Recording:
     path: Path
     metadata: dict[str, str]
     topics: dict[str, list] = field(default_factory=dict)  # topic -> [(log_time_ns, decoded message)]
+    #: topic -> where each of its messages is among all those read (their order in the file, across topics)
+    positions: dict[str, list[int]] = field(default_factory=dict)
     truncated: str | None = None
     count: int = 0
 
@@ -147,6 +151,7 @@ def _scan(path: Path, fh, size: int, rec: Recording, topics: set[str] | None) ->
         name = relative(ch.topic, rec.metadata.get("namespace", NAMESPACE))  # recorded under the node's namespace
         if topics is None or name in topics:
             rec.topics.setdefault(name, []).append((r.log_time, decoded))
+            rec.positions.setdefault(name, []).append(rec.count)
             rec.count += 1
 
     def inner(r, where: str) -> None:
@@ -268,31 +273,46 @@ def _settings(path: Path, rec: Recording):
     return scene, cfg
 
 
+def _by_interval(rec: Recording, topic: str, applied: list, at: list[int]) -> tuple[dict[int, object], int | None]:
+    """What the node wrote about interval k (its `rachis/accel_applied` is applied[k], at position at[k] in the
+    file) on `topic`: the first such message after that accel_applied, before the next one, at the same stamp
+    (stamps alone repeat after a lockstep reset). For twist_applied, the angular velocity set at the interval's
+    start; for joint_states, the state it reached. Also the stamp of a message that follows no interval (or None)."""
+    out, stray = {}, None
+    for pos, (ns, m) in zip(rec.positions.get(topic, []), rec.topics.get(topic, [])):
+        k = bisect.bisect_left(at, pos) - 1
+        if k >= 0 and applied[k][0] == ns:
+            if k not in out:
+                out[k] = m.twist.angular if topic == "rachis/twist_applied" else m
+        elif stray is None:
+            stray = ns
+    return out, stray
+
+
 def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
     """Re-simulate a recording and compare its joint states. A truncated file is checked up to its last
     complete chunk; a corrupted one raises CorruptRecording; `CheckResult.ok` says whether every deviation
     is within `tolerance`."""
     path = Path(path)
-    rec = read_recording(path, {"joint_states", "rachis/accel_applied", "sim_time"})
+    rec = read_recording(path, {"joint_states", "rachis/accel_applied", "rachis/twist_applied", "sim_time"})
     scene, solver_cfg = _settings(path, rec)
     n_dof = scene.model.n_dof
-    recorded = {}
+    states = []  # (logged at = the header's stamp in ns, angles, rates), in the file's order
     for ns, m in rec.topics.get("joint_states", []):
         q, w = np.array(m.position, dtype=float), np.array(m.velocity, dtype=float)
         if q.shape != (n_dof,) or w.shape != (n_dof,):
             raise RecordingError(f"{path}: joint_states logged at {_t(ns)} has {q.size} positions and {w.size} "
                                  f"velocities, the recorded scene has {n_dof} angles")
-        recorded[ns] = (q, w)  # by the time it was logged at (the header's stamp, ns)
-    if not recorded:
+        states.append((ns, q, w))
+    if not states:
         raise RecordingError(f"{path}: no joint_states to compare")
     source = rec.metadata.get("input_source", "scene")
     dq = dw = 0.0
     worst, worst_t = -1.0, math.nan
     n = 0
 
-    def compare(t: float, angles, rates) -> None:
+    def compare(t: int, q, w, angles, rates) -> None:
         nonlocal dq, dw, worst, worst_t, n
-        q, w = recorded[t]
         a, b = _deviation(angles, q), _deviation(rates, w)
         dq, dw = max(dq, a), max(dw, b)
         if max(a, b) > worst:
@@ -304,25 +324,36 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         run = simulate(scene, solver_cfg.get("t_end"), method=rec.metadata.get("method"), rtol=solver_cfg.get("rtol"),
                        atol=solver_cfg.get("atol"), output_interval=solver_cfg.get("output_interval"),
                        cross_check=False)
+        recorded = {ns: (q, w) for ns, q, w in states}
         for k, t in enumerate(run.t):
             key = to_ns(t)
             if key in recorded:
-                compare(key, run.angles[k], run.angular_velocities[k])
+                compare(key, *recorded[key], run.angles[k], run.angular_velocities[k])
     else:
         from ..solver.solver import Solver
-        solver = Solver(scene)
-        applied = rec.topics.get("rachis/accel_applied", [])
+        # the node's solver may be turned by its inputs (recordings before it could say "turning" had no turns)
+        turning = rec.metadata.get("turning") == "true"
+        solver = Solver(scene, turning=turning)
+        applied, at = rec.topics.get("rachis/accel_applied", []), rec.positions.get("rachis/accel_applied", [])
         # each applied interval ends at a simulated time: `sim_time`, logged at the same stamp (its header is
         # the ROS clock), or the stamp itself in recordings made before the node stamped with its clock
         sim = {ns: to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec)) for ns, m in rec.topics.get("sim_time", [])}
-        for ns, m in applied:
+        omega, stray = _by_interval(rec, "rachis/twist_applied", applied, at)
+        if stray is not None:
+            raise RecordingError(f"{path}: rachis/twist_applied logged at {_t(stray)} does not follow the "
+                                 f"rachis/accel_applied of its interval")
+        reached = _by_interval(rec, "joint_states", applied, at)[0]
+        for k, (ns, m) in enumerate(applied):
             t_end = seconds(sim.get(ns, ns))
             if t_end < solver.t:  # the node was reset
-                solver = Solver(scene)
+                solver = Solver(scene, turning=turning)
             a, w = m.accel.linear, m.accel.angular
-            solver.advance(t_end - solver.t, (a.x, a.y, a.z, w.x, w.y, w.z))
-            if ns in recorded:
-                compare(ns, solver.angles, solver.angular_velocities)
+            set_omega = omega.get(k)
+            solver.advance(t_end - solver.t, (a.x, a.y, a.z, w.x, w.y, w.z),
+                           None if set_omega is None else (set_omega.x, set_omega.y, set_omega.z))
+            if k in reached:
+                compare(ns, *(np.array(v, dtype=float) for v in (reached[k].position, reached[k].velocity)),
+                        solver.angles, solver.angular_velocities)
     if n == 0:
         raise RecordingError(f"{path}: no recorded joint state matches a re-simulated time")
     return CheckResult(n, dq, dw, source, rec.truncated, worst_t, tolerance)

@@ -14,7 +14,7 @@ import numpy as np
 from ..model.model import Scene
 from ..physics import observe as obs
 from ..physics.damage import detaching, fatigue, pair_bruise_thresholds
-from ..physics.layout import LEDGER_TERMS, Layout, angular_velocity, ledger, orientation
+from ..physics.layout import LEDGER_TERMS, Layout, angular_velocity, ledger, layout_of, orientation
 from . import catalogue, trust
 from .impacts import Impacts
 
@@ -42,7 +42,7 @@ class Run:
 
     @property
     def layout(self) -> Layout:
-        return self.scene.layout
+        return layout_of(self.scene)
 
     @property
     def angles(self) -> np.ndarray:

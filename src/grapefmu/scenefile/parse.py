@@ -379,24 +379,22 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
     if "orientation" in raw or "angular_velocity" in raw:
         rpy = v.vector(f"{key}.orientation", raw.get("orientation", [0.0, 0.0, 0.0]), 3, -2 * math.pi, 2 * math.pi,
                        "rad")
-        w = v.vector(f"{key}.angular_velocity", raw.get("angular_velocity", [0.0, 0.0, 0.0]), 3, -MAX_OMEGA, MAX_OMEGA,
+        w = v.vector(f"{key}.angular_velocity", raw.get("angular_velocity", [0.0, 0.0, 0.0]), 3, -exc.MAX_ANGULAR_VELOCITY, exc.MAX_ANGULAR_VELOCITY,
                      "rad/s")
         ex = ex.starting(exc.quaternion_from_rpy(*rpy), w)
     return ex
 
 
-#: the largest angular velocity or acceleration a scene may ask of the rachis (rad/s, rad/s²): beyond any robot
-MAX_OMEGA, MAX_ALPHA = 1e2, 1e4
 
 
 def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc.Excitation:
-    acc = 1e3  # m/s², about 100 g: far beyond any gripper, so larger is a unit mistake
+    acc = exc.MAX_ACCEL
     if kind == "none":
         return exc.constant()
     if kind == "constant":
         return exc.constant(v.linear(f"{key}.accel", raw.get("accel", [0.0, 0.0, 0.0]), -acc, acc, "m/s²"),
-                            v.vector(f"{key}.angular_accel", raw.get("angular_accel", [0.0, 0.0, 0.0]), 3, -MAX_ALPHA,
-                                     MAX_ALPHA, "rad/s²"))
+                            v.vector(f"{key}.angular_accel", raw.get("angular_accel", [0.0, 0.0, 0.0]), 3, -exc.MAX_ANGULAR_ACCEL,
+                                     exc.MAX_ANGULAR_ACCEL, "rad/s²"))
     if kind == "csv":
         f = raw.get("file")
         if not isinstance(f, str):
@@ -432,19 +430,19 @@ def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc
         if peak > acc:
             raise SceneError(f"{key}.moves", f"peak acceleration {peak:.3g} m/s² exceeds ±{acc:g} m/s²; lengthen a move")
         peak = abs(ex.arrays.table[:, 4:7]).max()
-        if peak > MAX_ALPHA:
-            raise SceneError(f"{key}.moves", f"peak angular acceleration {peak:.3g} rad/s² exceeds ±{MAX_ALPHA:g} "
+        if peak > exc.MAX_ANGULAR_ACCEL:
+            raise SceneError(f"{key}.moves", f"peak angular acceleration {peak:.3g} rad/s² exceeds ±{exc.MAX_ANGULAR_ACCEL:g} "
                                              "rad/s²; lengthen a move")
         return ex
     if kind == "impulse":
         peak = v.linear(f"{key}.peak", raw.get("peak"), -acc, acc, "m/s²")
-        angular = v.vector(f"{key}.angular_peak", raw.get("angular_peak", [0.0, 0.0, 0.0]), 3, -MAX_ALPHA, MAX_ALPHA,
+        angular = v.vector(f"{key}.angular_peak", raw.get("angular_peak", [0.0, 0.0, 0.0]), 3, -exc.MAX_ANGULAR_ACCEL, exc.MAX_ANGULAR_ACCEL,
                            "rad/s²")
         dur = v.number(f"{key}.duration", raw.get("duration", 0.01), 1e-6, 10.0, unit="s")
         return exc.impulse(peak, start, dur, angular)
     amp = v.linear(f"{key}.amplitude", raw.get("amplitude"), -acc, acc, "m/s²")
-    angular = v.vector(f"{key}.angular_amplitude", raw.get("angular_amplitude", [0.0, 0.0, 0.0]), 3, -MAX_ALPHA,
-                       MAX_ALPHA, "rad/s²")
+    angular = v.vector(f"{key}.angular_amplitude", raw.get("angular_amplitude", [0.0, 0.0, 0.0]), 3, -exc.MAX_ANGULAR_ACCEL,
+                       exc.MAX_ANGULAR_ACCEL, "rad/s²")
     dur = v.number(f"{key}.duration", raw.get("duration", max(t_end - start, 1e-3)), 1e-3, 1e5, unit="s")
     if kind == "sine":
         f = v.number(f"{key}.frequency", raw.get("frequency"), 0.0, 1e4, lo_open=True, unit="Hz")

@@ -16,6 +16,7 @@ import numpy as np
 from ..model.model import ContactPair, Coupling, Model, Scene
 from ..errors import SolverError
 from ..physics.forces import CONTACT
+from ..physics.layout import layout_of
 from ..results.impacts import Impacts
 from ..results.records import TOTALS, concat
 from ..results.run import Run
@@ -74,7 +75,7 @@ def run_by_group(scene: Scene, simulate_one: Callable[[Scene, float, float], Run
 def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
     """One Run of the whole scene from the runs of its groups (all sampled on the same grid)."""
     m = scene.model
-    lay = scene.layout
+    lay = layout_of(scene)
     t = runs[0].t
     n, npair = len(t), len(m.pairs)
     y = np.zeros((n, lay.size))

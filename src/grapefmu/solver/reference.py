@@ -26,7 +26,7 @@ from ..physics.excitation import base_accel, held
 from ..physics.compiled import jit
 from ..physics.forces import CONTACT, pair_force
 from ..physics.kinematics import pair_state, workspace
-from ..physics.layout import initial
+from ..physics.layout import initial, layout_of
 from ..results.impacts import IMPACT, Impacts
 from ..results.records import TOTALS
 from ..results.run import Run
@@ -49,7 +49,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     m = scene.model
     M = scene.arrays
     X = scene.excitation.arrays
-    lay = scene.layout
+    lay = layout_of(scene)
     npair = len(m.pairs)
     ny = lay.size
     st = np.zeros(npair, dtype=CONTACT)

@@ -16,12 +16,13 @@ import numpy as np
 
 from ..errors import SolverError
 from ..model.contact import HC_MIN_APPROACH_SPEED, Law
+from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from ..model.model import Scene, off_axis
 from ..physics import observe as obs
 from ..physics.compiled import jit
 from ..physics.excitation import ACCEL_COMPONENTS, INPUT, base_accel
 from ..physics.kinematics import kinematics, workspace
-from ..physics.layout import LEDGER_TERMS, angular_velocity, initial, ledger, orientation
+from ..physics.layout import LEDGER_TERMS, angular_velocity, initial, ledger, layout_of, orientation
 from ..results import catalogue
 from ..results.impacts import Impacts
 from ..results.records import concat
@@ -36,8 +37,6 @@ from .tableau import BOGACKI_SHAMPINE, DOPRI5
 #: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
 #: wider means fewer rebuilds but more near pairs to watch on every step
 SKIN_FRACTION = 0.5
-#: the largest base acceleration any face accepts, m/s² (about 100 g: beyond any gripper, so a unit mistake)
-MAX_ACCEL = 1e3
 
 NO_IMPACTS = Impacts.from_records(np.zeros(0, dtype=st.IMPACT))
 
@@ -90,8 +89,9 @@ class Solver:
         self.model = scene.model
         self.M = scene.arrays
         self.excitation = scene.excitation.arrays
-        self.layout = scene.layout
-        self._plane_normal = self.model.plane_normal(scene.excitation)
+        self.layout = layout_of(scene)
+        n = self.model.plane_normal(scene.excitation)
+        self._plane_normal = None if n is None else tuple(float(c) for c in n)  # floats: off_axis without numpy
         if skin is None:
             skin = SKIN_FRACTION * float(np.mean([b.radius for b in self.model.berries]))
         th = scene.thresholds
@@ -272,8 +272,9 @@ class Solver:
         (a master that gives ω and α: ω is its value, α what it does until the next step). On failure the state
         is left unchanged.
 
-        The common call (a float step, a tuple of six floats) is checked inline and goes to the compiled side as
-        one Session: a face's step costs about 1.6 µs more than its physics (docs/solver.md)."""
+        The common call (a float step, a tuple of six floats, ω None or a tuple of three floats) is checked inline
+        and goes to the compiled side as one Session: a face's step costs about 1.6 µs more than its physics
+        (docs/solver.md)."""
         if type(dt) is not float or not 0.0 < dt < math.inf:
             dt = _step_size(dt)
         if base_accel is None:
@@ -286,7 +287,10 @@ class Solver:
         if angular_velocity is None:
             omega_set, omega = False, _NO_OMEGA
         else:
-            omega_set, omega = True, _angular_velocity(angular_velocity)
+            omega_set, omega = True, angular_velocity
+            if not (type(omega) is tuple and len(omega) == 3 and all(
+                    type(v) is float and -MAX_ANGULAR_VELOCITY <= v <= MAX_ANGULAR_VELOCITY for v in omega)):
+                omega = _angular_velocity(angular_velocity)
         if not self.layout.turning and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
             raise SolverError("base_accel, angular_velocity: this solver's rachis does not turn (its scene does "
                               "not turn it); build it with Solver(scene, turning=True) to drive rotation as an input")
@@ -402,8 +406,6 @@ def _step_size(dt) -> float:
 
 _NO_ACCEL = (0.0,) * 6
 _NO_OMEGA = (0.0,) * 3
-#: the largest angular velocity any face accepts, rad/s (about 1600 rpm: beyond any robot wrist, so a unit mistake)
-MAX_ANGULAR_VELOCITY = 1e2
 
 
 def _held_accel(base_accel) -> tuple[float, ...]:
@@ -418,8 +420,9 @@ def _held_accel(base_accel) -> tuple[float, ...]:
         raise SolverError(f"base_accel: expected six numbers ({', '.join(ACCEL_COMPONENTS)}) in m/s² and rad/s², or "
                           f"the planar pair (a_x, a_z), got {base_accel!r}")
     for name, v in zip(ACCEL_COMPONENTS, a):
-        if not (math.isfinite(v) and abs(v) <= MAX_ACCEL):
-            raise SolverError(f"base_accel: {name} = {v!r}; expected a finite value within ±{MAX_ACCEL:g} "
+        bound = MAX_ACCEL if name in ACCEL_COMPONENTS[:3] else MAX_ANGULAR_ACCEL
+        if not (math.isfinite(v) and abs(v) <= bound):
+            raise SolverError(f"base_accel: {name} = {v!r}; expected a finite value within ±{bound:g} "
                               f"{'m/s²' if name[0] == 'a' and len(name) == 2 else 'rad/s²'}")
     return a
 
