@@ -42,6 +42,7 @@ from grapefmu.model.excitation import constant
 from grapefmu.model.model import Obstacle
 from grapefmu.physics.dynamics import derivative
 from grapefmu.physics.forces import CONTACT
+from grapefmu.physics.layout import layout_of
 
 from .conftest import scene
 
@@ -379,7 +380,7 @@ def core_state(sc, v, rachis):
     ride in its y; derivative() takes the acceleration it is handed."""
     sc = replace(sc, excitation=constant((0.0, 0.0, 0.0), (0.0, 1.0, 0.0)))
     m = sc.model
-    lay = sc.layout
+    lay = layout_of(sc)
     assert lay.turning
     y = np.zeros(lay.size)
     dofs = _dof_names(["spherical" if b.spherical else "planar" for b in m.berries])
@@ -730,7 +731,7 @@ def test_conical_equilibrium_with_a_hinge_spring_is_a_rest_point_of_the_rhs():
     theta = cone_angle(omega, m, length, k)
     for angle in ([theta, 0.0], [0.0, theta], [theta * 1.01, 0.0]):
         sc = scene({"berries": [one_berry(hinge_stiffness=k, angle=angle)], "excitation": spin_about_z(omega)})
-        lay = sc.layout
+        lay = layout_of(sc)
         y = np.zeros(lay.size)
         y[lay.q] = angle
         y[lay.base_angular_velocity] = [0.0, 0.0, omega]
