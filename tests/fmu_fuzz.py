@@ -134,7 +134,7 @@ def play(path, unzipped, md, program, index):
             st, _ = a.step(a.t + offset, dt)
             if st <= 1:
                 a.t += dt
-            twin = lambda: b.step(b.t + offset, dt)  # noqa: E731
+            twin = lambda t=b.t: b.step(t + offset, dt)  # noqa: E731 - B's time before the step below adds dt
         elif kind in ("corrupt", "crafted"):
             good = a.get_state_bytes()
             data = corrupt(good, op[1], op[2]) if kind == "corrupt" else crafted(good, op[1], op[2])
@@ -159,8 +159,8 @@ def play(path, unzipped, md, program, index):
             accepted += 1
             if kind == "step":
                 b.t += op[1]
-            if twin:
-                twin()
+            if twin and max(x for x in twin() if isinstance(x, int)) > 1:  # (status, result or a 2nd status)
+                problems.append(f"{op}: accepted by A, refused by its twin B (the twin must follow A)")
     st, _ = a.step(a.t, 1e-3) if a.t + 1e-3 <= STOP else (0, None)
     if st > 1:
         problems.append(f"a normal step after the program was refused (status {st})")
