@@ -218,7 +218,7 @@ def test_bad_inputs_are_rejected_and_the_node_survives(ros, tmp_path):
         ctl.connect()
         drive(ctl, [(0.0, along_x(1.0)), (0.01, along_x(1.0))])
         bad = [(0.02, along_x(math.nan)), (0.03, along_x(math.inf)), (0.04, along_x(1e4)),
-               (0.045, (0.0, 0.0, 0.0, 0.0, 2e3, 0.0)),    # an angular acceleration above max_angular_accel
+               (0.045, (0.0, 0.0, 0.0, 0.0, 2e4, 0.0)),    # an angular acceleration above max_angular_accel
                (0.046, along_x(1.0), (0.0, 200.0, 0.0)),    # an angular velocity above the solver's bound (the
                (0.047, (0.0, 0.0, 0.0, 3.0, 0.0, 0.0)),     # accel still counts); a turn about x: planar berries
                (0.048, along_x(1.0), None, "gripper"),      # a frame the node does not know
