@@ -21,7 +21,8 @@ from .layout import model_offsets
 @jit
 def rhs(t, t_ref, y, dy, contacts, M, X, inp, W, pairs, n_pairs):
     """dy/dt. Lagrange's equations: m l² s̈ = Q_s (planar); m l² s̈ + m l² sin s cos s ṫ² = Q_s and
-    m l² cos² s ẗ − 2 m l² cos s sin s ṡ ṫ = Q_t (spherical), with Q from every force and the hinge.
+    m l² cos² s ẗ − 2 m l² cos s sin s ṡ ṫ = Q_t (spherical), with Q from every force (the moving frame's fields
+    among them, docs/model.md §2a) and the hinge; then the rachis' own motion and the energy integrals' rates.
 
     Contact is evaluated for the first n_pairs entries of `pairs` (the broad phase's near list holds
     every pair that can push). A dy longer than the state by 2P also gets each pair's force and
