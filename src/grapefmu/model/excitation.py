@@ -10,6 +10,7 @@ where a(t) or its derivative jumps; the solver lands a step on every one of them
 from __future__ import annotations
 
 import csv
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -53,10 +54,11 @@ class Excitation:
     angular_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     may_turn: bool = False  # a face's inputs may turn the rachis, whatever this excitation does
 
-    @property
+    @functools.cached_property
     def turns(self) -> bool:
         """Whether the rachis' orientation is ever other than level: it starts turned or turning, the excitation
-        turns it, or a face may (`may_turn`). A run's state carries ω and the orientation only then."""
+        turns it, or a face may (`may_turn`). A run's state carries ω and the orientation only then. Cached (the
+        excitation is frozen): every Solver and layout asks, several times a run."""
         a = self.arrays
         rows = a.table[:, 4:7] if a.kind == TABLE else a.par[3:6]
         return bool(self.may_turn or np.any(rows != 0.0) or any(w != 0.0 for w in self.angular_velocity)

@@ -164,13 +164,15 @@ class Model:
     def planar(self) -> bool:
         return not any(b.spherical for b in self.berries)
 
-    def plane_normal(self, excitation) -> np.ndarray | None:
+    def plane_normal(self, excitation) -> tuple[float, float, float] | None:
         """The world direction of the rachis' y axis at the start, n = R₀ ŷ, if any berry is planar (its swing
-        plane is the rachis' x–z plane), else None."""
+        plane is the rachis' x–z plane), else None. In plain Python (R₀'s second column from the normalised
+        quaternion): every Solver and Scene asks, and scipy's Rotation costs ~0.1 ms a call."""
         if all(b.spherical for b in self.berries):
             return None
-        from scipy.spatial.transform import Rotation
-        return Rotation.from_quat(excitation.orientation).apply([0.0, 1.0, 0.0])
+        x, y, z, w = (float(c) for c in excitation.orientation)
+        s = 2.0 / (x * x + y * y + z * z + w * w)
+        return s * (x * y - z * w), 1.0 - s * (x * x + z * z), s * (y * z + x * w)
 
     def refuses_turn(self, excitation) -> tuple[str, str] | None:
         """(scene key, why) this model cannot follow the excitation's rotation, or None. A planar berry swings in
@@ -180,16 +182,16 @@ class Model:
         if n is None:
             return None
         a = excitation.arrays
-        alpha = a.table[:, 4:7] if a.kind == TABLE else a.par[3:6].reshape(1, 3)
+        alpha = a.table[:, 4:7] if a.kind == TABLE else tuple(float(c) for c in a.par[3:6])
         alpha_key = {"constant": "angular_accel", "impulse": "angular_peak", "sine": "angular_amplitude",
                      "sweep": "angular_amplitude"}.get(excitation.kind, "file")
         if abs(n[2]) > 1e-9:
             return ("excitation.orientation", f"the initial orientation tilts the rachis' y axis {math.degrees(math.asin(min(abs(n[2]), 1.0))):.3g}° "
                     "out of the horizontal; planar berries swing in the rachis' x–z plane, which must stay vertical "
                     "(turn about y and z only; use spherical berries for any orientation)")
-        for key, what, w in (("angular_velocity", "the initial angular velocity", np.asarray(excitation.angular_velocity)),
+        for key, what, w in (("angular_velocity", "the initial angular velocity", tuple(map(float, excitation.angular_velocity))),
                              (alpha_key, "the angular acceleration", alpha)):
-            if off_axis(w, n):
+            if (any(c != 0.0 for c in w) if type(w) is tuple else w.any()) and off_axis(w, n):  # no turn: none across
                 return (f"excitation.{key}", f"{what} turns the rachis about an axis other than its y axis "
                         f"{tuple(round(float(c), 6) for c in n)} (world); planar berries swing in the rachis' x–z "
                         "plane and follow rotation about y only (use spherical berries for any rotation)")

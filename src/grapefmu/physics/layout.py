@@ -61,6 +61,7 @@ def offsets(n, d, c, turning):
     return o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_contact + 1, o_contact + 2
 
 
+@functools.cache  # every Solver, run and scene's layout_of asks for one: built once per shape
 def layout(n: int, d: int, c: int, turning: bool = False) -> Layout:
     o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_w, size = offsets.py_func(n, d, c, turning)
     return Layout(n, d, c, bool(turning), slice(0, d), slice(d, 2 * d), slice(o_bv, o_b), slice(o_b, o_om), slice(o_om, o_rot),
