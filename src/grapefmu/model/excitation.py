@@ -72,6 +72,15 @@ class Excitation:
                                                   else self.angular_velocity)))
 
 
+def rotation_matrix(qx, qy, qz, qw):
+    """R (row-major, 9 numbers) of the quaternion (x, y, z, w), normalised here: the one formula, in plain Python
+    for the model's checks and compiled into the core's rachis frame (physics/kinematics.py)."""
+    s = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)
+    return (1.0 - s * (qy * qy + qz * qz), s * (qx * qy - qz * qw), s * (qx * qz + qy * qw),
+            s * (qx * qy + qz * qw), 1.0 - s * (qx * qx + qz * qz), s * (qy * qz - qx * qw),
+            s * (qx * qz - qy * qw), s * (qy * qz + qx * qw), 1.0 - s * (qx * qx + qy * qy))
+
+
 def quaternion_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
     """The quaternion (x, y, z, w) of fixed-axis roll, pitch, yaw (REP-103: R = R_z(yaw) R_y(pitch) R_x(roll))."""
     from scipy.spatial.transform import Rotation

@@ -15,7 +15,7 @@ import numpy as np
 
 from .contact import ContactLaw
 from ..errors import SceneError
-from .excitation import TABLE, Excitation, constant
+from .excitation import TABLE, Excitation, constant, rotation_matrix
 
 
 @dataclass(frozen=True)
@@ -166,13 +166,11 @@ class Model:
 
     def plane_normal(self, excitation) -> tuple[float, float, float] | None:
         """The world direction of the rachis' y axis at the start, n = R₀ ŷ, if any berry is planar (its swing
-        plane is the rachis' x–z plane), else None. In plain Python (R₀'s second column from the normalised
-        quaternion): every Solver and Scene asks, and scipy's Rotation costs ~0.1 ms a call."""
+        plane is the rachis' x–z plane), else None: R₀'s second column, in plain Python (every Solver and Scene
+        asks, and scipy's Rotation costs ~0.1 ms a call)."""
         if all(b.spherical for b in self.berries):
             return None
-        x, y, z, w = (float(c) for c in excitation.orientation)
-        s = 2.0 / (x * x + y * y + z * z + w * w)
-        return s * (x * y - z * w), 1.0 - s * (x * x + z * z), s * (y * z + x * w)
+        return rotation_matrix(*(float(c) for c in excitation.orientation))[1::3]
 
     def refuses_turn(self, excitation) -> tuple[str, str] | None:
         """(scene key, why) this model cannot follow the excitation's rotation, or None. A planar berry swings in

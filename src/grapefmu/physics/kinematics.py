@@ -16,6 +16,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .compiled import inline, jit
+from ..model.excitation import rotation_matrix
 from ..model.model import BOX, PLANE
 from .layout import model_head, model_offsets
 
@@ -60,6 +61,9 @@ class Frame(NamedTuple):
     turned: float
 
 
+_rotation = inline(rotation_matrix)
+
+
 @inline
 def rachis_frame(y, M):
     """The rachis frame y holds (physics/layout.py): R from the orientation quaternion (normalised here: the
@@ -73,10 +77,7 @@ def rachis_frame(y, M):
     if qx == 0.0 and qy == 0.0 and qz == 0.0 and wx == 0.0 and wy == 0.0 and wz == 0.0:
         return Frame(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, y[o_b], y[o_b + 1], y[o_b + 2],
                      y[o_bv], y[o_bv + 1], y[o_bv + 2], 0.0, 0.0, 0.0, 0.0)
-    s = 2.0 / (qx * qx + qy * qy + qz * qz + qw * qw)
-    r00, r01, r02 = 1.0 - s * (qy * qy + qz * qz), s * (qx * qy - qz * qw), s * (qx * qz + qy * qw)
-    r10, r11, r12 = s * (qx * qy + qz * qw), 1.0 - s * (qx * qx + qz * qz), s * (qy * qz - qx * qw)
-    r20, r21, r22 = s * (qx * qz - qy * qw), s * (qy * qz + qx * qw), 1.0 - s * (qx * qx + qy * qy)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = _rotation(qx, qy, qz, qw)
     return Frame(r00, r01, r02, r10, r11, r12, r20, r21, r22, y[o_b], y[o_b + 1], y[o_b + 2],
                  y[o_bv], y[o_bv + 1], y[o_bv + 2],
                  r00 * wx + r10 * wy + r20 * wz, r01 * wx + r11 * wy + r21 * wz, r02 * wx + r12 * wy + r22 * wz, 1.0)
