@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..model.excitation import rotation_matrix
 from ..model.model import Model
 from ..physics.excitation import ACCEL_COMPONENTS
 from ..physics.layout import LEDGER_TERMS
@@ -88,9 +89,10 @@ def file_column(column: str, unit: str) -> str:
 
 
 def rotations(quaternions: np.ndarray) -> np.ndarray:
-    """(S, 3, 3) R of quaternions (S, 4) (x, y, z, w; normalised here)."""
-    from scipy.spatial.transform import Rotation
-    return Rotation.from_quat(quaternions).as_matrix().reshape(-1, 3, 3)
+    """(S, 3, 3) R of quaternions (S, 4) (x, y, z, w; normalised here): model.excitation.rotation_matrix, the one
+    formula, on whole columns."""
+    q = np.asarray(quaternions, dtype=float).reshape(-1, 4)
+    return np.stack(rotation_matrix(*q.T), axis=-1).reshape(-1, 3, 3)
 
 
 def world(s: Snapshot, points: np.ndarray) -> np.ndarray:
