@@ -1,7 +1,38 @@
-"""The numba decorators every compiled module uses (one place for the compile options)."""
+"""The numba decorators every compiled module uses (one place for the compile options), and how numba counts
+references in this process."""
 from __future__ import annotations
 
+import os
+
 import numba as nb
+from numba.core.runtime import nrt, nrtdynmod
+
+#: set to 1 to keep numba's atomic reference counts (see plain_reference_counts)
+ATOMIC_REFCOUNTS_VARIABLE = "GRAPEFMU_ATOMIC_REFCOUNTS"
+
+
+def plain_reference_counts() -> bool:
+    """Make numba's reference counts plain increments instead of atomic ones, if numba has not started its runtime
+    yet in this process; returns whether they are plain.
+
+    Why: the compiled core extracts arrays from its model and state records all the time, and each extraction costs
+    an increment and a decrement of the array's count. Atomic (lock-prefixed) ones took about 60 % of a run's time
+    on the benchmark machine (perf); plain ones cut the paper-collision run by ~25 % at rtol 1e-6 and ~45 % at 1e-10
+    (benchmarks/refcounts.py). Safe because every compiled function here holds the GIL (no nogil, no parallel:
+    tests/test_compiled.py checks), so no two threads touch a count at once. numba's runtime is process-wide: other
+    numba code in the process that releases the GIL needs atomic counts; set GRAPEFMU_ATOMIC_REFCOUNTS=1 for it (or
+    start numba's runtime before importing grapefmu, which leaves the counts atomic)."""
+    if os.environ.get(ATOMIC_REFCOUNTS_VARIABLE, "") not in ("", "0"):
+        return False
+    if nrt.rtsys._init:  # started already: its counting functions are compiled
+        return bool(getattr(nrtdynmod, "_disable_atomicity", 0))
+    if not hasattr(nrtdynmod, "_disable_atomicity"):  # a numba without the switch: keep its default
+        return False
+    nrtdynmod._disable_atomicity = 1
+    return True
+
+
+PLAIN_REFCOUNTS = plain_reference_counts()
 
 jit = nb.njit(cache=True, error_model="numpy")
 #: small helpers are inlined into their callers: a call boundary costs more than their arithmetic

@@ -7,10 +7,9 @@ motion (ḃ, b, ω and its orientation) and the rates of the energy integrals th
 """
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
-from .compiled import jit
+from .compiled import inline, jit
 from ..model.excitation import constant
 from .excitation import applied_accel, held
 from .forces import forces, generalized_forces, hinge_torque
@@ -86,7 +85,7 @@ def rhs(t, t_ref, y, dy, contacts, M, X, inp, W, pairs, n_pairs):
 
 #: the right-hand side inlined into the Runge–Kutta stage loop only: a compiled call passing a dozen
 #: arrays costs more than two berries' arithmetic, and inlining it everywhere doubles compile time
-rhs_inline = nb.njit(cache=True, error_model="numpy", inline="always")(rhs.py_func)
+rhs_inline = inline(rhs.py_func)
 
 __all__ = ["rhs", "rhs_inline"]
 

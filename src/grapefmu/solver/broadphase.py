@@ -11,9 +11,9 @@ import math
 
 import numpy as np
 
-from ..physics.compiled import jit
-from ..physics.kinematics import KINEMATICS, contact_gap, kinematics
-from ..physics.layout import model_head
+from ..physics.compiled import inline, jit
+from ..physics.kinematics import KINEMATICS, contact_gap, fixed_in_world, kinematics
+from ..physics.layout import model_head, model_offsets
 from .events import N_SAMPLES
 from .step import dense_head
 
@@ -75,6 +75,77 @@ def reach(samples, reference, world):
                     d += 0.5 * math.sqrt((p.wx - o.wx) ** 2 + (p.wy - o.wy) ** 2 + (p.wz - o.wz) ** 2)
                 worst = max(worst, d)
     return worst
+
+
+@inline
+def travel(q, h, r):
+    """A bound on how far component r of y gets on the step's dense output: |y_r(θ) − y_r(0)| = h |Σ_j Q[r, j] θ^(j+1)|
+    ≤ h Σ_j |Q[r, j]| for θ in [0, 1]."""
+    s = 0.0
+    for j in range(q.shape[1]):
+        s += abs(q[r, j])
+    return h * s
+
+
+@jit
+def quiet(y0, q, h, M, contacts, B, cfg, kin, bound):
+    """A certificate that a step needs neither samples nor an event search, or −1: no berry gets skin/2 from the
+    near list's reference, and no near pair that is apart (and watched) can touch, on the step's dense output.
+    Returns the bound on how far a berry got from the reference (the caller's `far`, as keep_valid's).
+
+    The bound on berry i's travel: its twig end sweeps at most l (|Δs| + |Δt|) (u is 1-Lipschitz in s and in t),
+    and in the world frame also |Δb| + ‖ΔR‖ |p| (‖ΔR‖ ≤ 2 |Δq̂| ≤ 4 |Δq| / |q| for the orientation quaternion q);
+    each from travel(). A gap moves at most by the travel of what it separates (|∇δ| ≤ 1 in each position).
+    kin gets stage 1 at the step's start; bound ((N, 2)) each berry's travel in the rachis and the world frame."""
+    nb = M.berry.shape[0]
+    world = M.obstacle.shape[0] > 0
+    o_bv, o_b, o_om, o_rot = model_offsets(M)[:4]
+    base = 0.0
+    turn = 0.0
+    if world:
+        base = math.sqrt(travel(q, h, o_b) ** 2 + travel(q, h, o_b + 1) ** 2 + travel(q, h, o_b + 2) ** 2)
+        if M.turning:
+            n0 = math.sqrt(y0[o_rot] ** 2 + y0[o_rot + 1] ** 2 + y0[o_rot + 2] ** 2 + y0[o_rot + 3] ** 2)
+            if n0 < 0.5:
+                return -1.0
+            turn = 4.0 * math.sqrt(travel(q, h, o_rot) ** 2 + travel(q, h, o_rot + 1) ** 2
+                                   + travel(q, h, o_rot + 2) ** 2 + travel(q, h, o_rot + 3) ** 2) / n0
+    kinematics(y0, M, kin)
+    ref = B.reference
+    far = 0.0
+    for i in range(nb):
+        b = M.berry[i]
+        d = travel(q, h, b.dof)
+        if b.n_angles == 2:
+            d += travel(q, h, b.dof + 1)
+        d *= b.twig_length
+        k = kin[i]
+        bound[i, 0] = d
+        far = max(far, d + math.sqrt((k.px - ref[i, 0]) ** 2 + (k.py - ref[i, 1]) ** 2 + (k.pz - ref[i, 2]) ** 2))
+        if world:
+            dw = d + base + turn * (math.sqrt(k.px * k.px + k.py * k.py + k.pz * k.pz) + d)
+            bound[i, 1] = dw
+            far = max(far, dw + math.sqrt((k.wx - ref[i, 3]) ** 2 + (k.wy - ref[i, 4]) ** 2 + (k.wz - ref[i, 5]) ** 2))
+    if not (far <= 0.5 * cfg.skin):
+        return -1.0
+    if not cfg.locate:
+        return far
+    for kk in range(B.count[0]):
+        p = B.near[kk]
+        c = contacts[p]
+        if c.smooth:
+            continue  # evaluated inline, never located
+        if c.mode != 0:
+            return -1.0
+        pr = M.pair[p]
+        if pr.j < nb:
+            reach = bound[pr.i, 0] + bound[pr.j, 0]
+        else:
+            reach = bound[pr.i, 1] if fixed_in_world(M, pr) else bound[pr.i, 0]
+        delta = contact_gap(M, pr, kin)[0]
+        if not (delta + 1.001 * reach + 1e-12 < 0.0):  # margin for rounding in the gap and the polynomials
+            return -1.0
+    return far
 
 
 @jit

@@ -15,7 +15,7 @@ from ..physics.compiled import jit
 from ..physics.dynamics import rhs
 from ..physics.excitation import applied_accel
 from ..physics.kinematics import Workspace, kinematics, workspace
-from .broadphase import keep_valid, rebuild, samples_for
+from .broadphase import keep_valid, quiet, rebuild, samples_for
 from .events import N_SAMPLES, classify, find_event, switch_pair
 from .sampling import sample_step
 from .step import dense, dense_coefficients, error_norm, initial_step, rk_step
@@ -41,6 +41,7 @@ class Buffers(NamedTuple):
     values: np.ndarray   # (N_SAMPLES + 1, 2P) its event functions
     W: Workspace
     samples: np.ndarray  # (N_SAMPLES + 1, N) KINEMATICS: the berries at the step's samples
+    travel: np.ndarray   # (N, 2) how far each berry can get in the step, rachis and world frame (broadphase.quiet)
 
 
 @jit
@@ -49,7 +50,7 @@ def buffers(M, ny):
     return Buffers(np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny),
                    np.zeros((N_SAMPLES + 1, p)), np.zeros((N_SAMPLES + 1, p)),
                    np.zeros((N_SAMPLES + 1, p), dtype=np.int64), np.zeros((N_SAMPLES + 1, 2 * p)), workspace(M),
-                   samples_for(M))
+                   samples_for(M), np.zeros((M.berry.shape[0], 2)))
 
 
 @jit
@@ -148,16 +149,21 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
                 continue
         dense_coefficients(TB, I.stages, I.dense, acc)
         q = I.dense
-        # --- broad phase, then the earliest contact switch inside the step
-        far = keep_valid(P.y, q, h, M, C, Bk, B, cfg, work, samples) if npair > 0 else 0.0
-        if far < 0.0:
-            clk.h = 0.5 * h
-            cnt.rejected += 1
-            continue
+        # --- broad phase, then the earliest contact switch inside the step: none to look for on a quiet step
+        far = quiet(P.y, q, h, M, C, B, cfg, samples[0], Z.travel) if npair > 0 else 0.0
+        sampled = far < 0.0
+        if sampled:
+            far = keep_valid(P.y, q, h, M, C, Bk, B, cfg, work, samples)
+            if far < 0.0:
+                clk.h = 0.5 * h
+                cnt.rejected += 1
+                continue
+        else:
+            cnt.quiet_steps += 1
         cnt.near_pairs_sum += B.count[0]
         theta_e = 1.0
         event = False
-        if cfg.locate and B.count[0] > 0:
+        if sampled and cfg.locate and B.count[0] > 0:
             theta_e, event = find_event(P.y, q, h, t0, M, C, B.near, B.count[0], W.berry, samples, values, work)
         t_commit = t_new if not event or theta_e >= 1.0 else t0 + theta_e * h
         if R.cursor[0].grid_dt > 0.0 and not record_grid(t0, t_commit, h, P.y, q, X, inp, C, Bk.totals, R):

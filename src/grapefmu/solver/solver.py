@@ -200,7 +200,7 @@ class Solver:
                 "switches": c["switches"], "impacts": int(self.state.book.totals["collision_count"][0]),
                 "zeno_guard_activations": c["zeno_activations"], "degrees_of_freedom": self.layout.d,
                 "candidate_pairs": len(self.model.pairs), "near_pairs_mean": c["near_pairs_sum"] / max(c["steps"], 1),
-                "near_list_rebuilds": c["near_list_rebuilds"]}
+                "near_list_rebuilds": c["near_list_rebuilds"], "quiet_steps": c["quiet_steps"]}
 
     # --- what the faces report ---------------------------------------------------------------------
     def observe(self, out: obs.Observation | None = None) -> obs.Observation:
