@@ -6,6 +6,7 @@ that turn forces into detachment and damage indicators.
 """
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -304,6 +305,17 @@ class Scene:
     def arrays(self) -> ModelArrays:
         """The model's arrays for this scene's runs: with `turning` when its rachis may turn."""
         return self.model.arrays._replace(turning=self.excitation.turns)
+
+    @cached_property
+    def digest(self) -> bytes:
+        """A hash of what the compiled core reads of this scene (its model's and excitation's arrays): with the
+        solver's settings, the fingerprint a solver state carries (Solver._fingerprint)."""
+        M, X = self.arrays, self.excitation.arrays
+        h = hashlib.blake2b(digest_size=16)
+        for part in (M.berry, M.pair, M.coupling, M.obstacle, np.array([M.gravity]), X.par, X.table):
+            for name in part.dtype.names or (None,):  # field by field: a record's padding bytes are not data
+                h.update(np.ascontiguousarray(part if name is None else part[name]).tobytes())
+        return h.digest()
 
     def free_to_turn(self) -> "Scene":
         """This scene with a rachis that may turn whatever its excitation does: a face's inputs may turn it."""

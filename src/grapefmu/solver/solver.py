@@ -141,12 +141,10 @@ class Solver:
 
     def _fingerprint(self) -> int:
         """The model, method and settings a state belongs to, as one number."""
-        M = self.M
-        h = hashlib.blake2b(digest_size=8)
-        for part in (M.berry, M.pair, M.coupling, M.obstacle, np.array([M.gravity]), self.config, self.excitation.par,
-                     self.excitation.table, np.frombuffer(self.method.encode(), np.uint8)):
-            for field in part.dtype.names or (None,):  # field by field: a record's padding bytes are not data
-                h.update(np.ascontiguousarray(part if field is None else part[field]).tobytes())
+        h = hashlib.blake2b(self.scene.digest, digest_size=8)
+        for name in self.config.dtype.names:  # field by field: a record's padding bytes are not data
+            h.update(self.config[name].tobytes())
+        h.update(self.method.encode())
         return int.from_bytes(h.digest(), "little")
 
     def get_state(self) -> st.SolverState:

@@ -10,6 +10,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..errors import StateError
 from ..physics.excitation import INPUT
 from ..physics.forces import CONTACT
 from ..results.records import IMPACT, TOTALS
@@ -85,6 +86,10 @@ class SolverState(NamedTuple):
     fingerprint: np.ndarray  # (1,) uint64: the model and method the state belongs to (set_state checks it)
 
 
+#: the state's groups by their field name (flatten's dotted names)
+_GROUPS = {"physical": Physical, "integrator": Integrator, "book": Book, "broad_phase": BroadPhase}
+
+
 class Recorder(NamedTuple):
     """Where a run's samples and finished impacts go (not part of the state)."""
 
@@ -98,8 +103,10 @@ class Recorder(NamedTuple):
 
 
 def recorder(cap: int, ny: int, npair: int, cap_impacts: int) -> Recorder:
-    return Recorder(np.zeros(cap), np.zeros((cap, ny)), np.zeros((cap, npair), dtype=CONTACT), np.zeros((cap, 6)),
-                    np.zeros(cap, dtype=TOTALS), np.zeros(cap_impacts, dtype=IMPACT), np.zeros(1, dtype=CURSOR))
+    """Rows are read only up to the cursor's counts, each written whole before (record_grid, switch_pair): left
+    uninitialised, as zero-filling a run's worth of structured rows cost more than a short run's steps."""
+    return Recorder(np.empty(cap), np.empty((cap, ny)), np.empty((cap, npair), dtype=CONTACT), np.empty((cap, 6)),
+                    np.empty(cap, dtype=TOTALS), np.empty(cap_impacts, dtype=IMPACT), np.zeros(1, dtype=CURSOR))
 
 
 def _walk(tree, prefix=""):
@@ -118,14 +125,17 @@ def flatten(state: SolverState) -> dict[str, np.ndarray]:
 
 def unflatten(arrays: dict[str, np.ndarray], cls=SolverState, prefix: str = ""):
     """The inverse of flatten (arrays are taken as they are: copy first if they are shared)."""
-    from ..errors import StateError
-
-    hints = {"physical": Physical, "integrator": Integrator, "book": Book, "broad_phase": BroadPhase}
-    missing = [f"{prefix}{f}" for f in cls._fields if f not in hints and f"{prefix}{f}" not in arrays]
-    if missing:
-        raise StateError(f"state {missing[0]}: missing (not a solver state of this version)")
-    return cls(*(unflatten(arrays, hints[f], f"{prefix}{f}.") if f in hints else arrays[f"{prefix}{f}"]
-                 for f in cls._fields))
+    parts = []
+    for f in cls._fields:
+        sub = _GROUPS.get(f)
+        if sub is not None:
+            parts.append(unflatten(arrays, sub, f"{prefix}{f}."))
+            continue
+        a = arrays.get(prefix + f)
+        if a is None:
+            raise StateError(f"state {prefix}{f}: missing (not a solver state of this version)")
+        parts.append(a)
+    return cls(*parts)
 
 
 def _dup(a: np.ndarray) -> np.ndarray:
@@ -147,17 +157,19 @@ def pack(state: SolverState) -> tuple[np.ndarray, SolverState]:
     """The state copied into one byte buffer, and the state as views on it (each array 16-byte aligned):
     saving the state before a step and restoring it after a failure are then one copy of the buffer."""
     leaves = flatten(state)
-    offsets, size = {}, 0
-    for name, a in leaves.items():
+    offsets, size = [], 0
+    for a in leaves.values():
         size = -(-size // 16) * 16
-        offsets[name] = size
+        offsets.append(size)
         size += a.nbytes
     memory = np.zeros(size // 8 + 2, np.uint64)  # in words, so that a copy moves 8 bytes at a time; + 2: an
     # empty array may sit at the very end
-    views = {name: np.ndarray(a.shape, a.dtype, buffer=memory, offset=offsets[name]) for name, a in leaves.items()}
-    packed = unflatten(views)
-    assign(packed, state)
-    return memory, packed
+    raw = memory.view(np.uint8)
+    views = {}
+    for (name, a), at in zip(leaves.items(), offsets):
+        raw[at:at + a.nbytes] = np.ascontiguousarray(a).reshape(-1).view(np.uint8)  # bytes: records field by field
+        views[name] = np.ndarray(a.shape, a.dtype, buffer=memory, offset=at)      # are ten times slower
+    return memory, unflatten(views)
 
 
 def _bytes(a: np.ndarray) -> np.ndarray:
@@ -188,7 +200,6 @@ def check(state, template: SolverState, n_breaks: int) -> None:
     """Refuse, naming the field, a state that does not fit the solver whose fresh state is `template` and
     whose excitation has n_breaks breakpoints (another scene, another method, another layout) or holds
     values the compiled core cannot trust (NaN, out-of-range indices and modes). Raises StateError."""
-    from ..errors import StateError
 
     if not isinstance(state, SolverState):
         raise StateError(f"state: expected the SolverState that get_state returns, got {type(state).__name__}")
