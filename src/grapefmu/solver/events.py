@@ -98,9 +98,17 @@ def locate_root(fn, sign, p, ta, tb, y0, q, h, M, contacts, kin, work, tol):
     return tb
 
 
+@inline
+def far_below(v, v_left, v_right):
+    """Whether a local maximum sampled as v between v_left and v_right is far below zero: below by twice the rise
+    from its neighbours (a parabola through the three peaks at most a quarter of that rise above v)."""
+    return v + 2.0 * ((v - v_left) + (v - v_right)) <= 0.0
+
+
 @jit
-def largest_on(fn, sign, p, a, b, y0, q, h, M, contacts, kin, work):
-    """Golden-section search for the largest sign·fn on [a, b] (θ units); returns (θ, value)."""
+def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work):
+    """Golden-section search for the largest sign·fn on [a, b] (θ units; fa, fb its values there): returns (θ, value)
+    once a value is positive, the bracket is ROOT_TOL wide, or the maximum is far below zero."""
     m = model_head(M)  # the head of y: angles, rates and the rachis motion
     gr = 0.6180339887498949
     c1 = b - gr * (b - a)
@@ -110,15 +118,15 @@ def largest_on(fn, sign, p, a, b, y0, q, h, M, contacts, kin, work):
     dense_head(c2, y0, q, h, work, m)
     f2 = value_at(fn, sign, p, work, M, contacts, kin)
     for _ in range(60):
-        if f1 > 0.0 or f2 > 0.0 or (b - a) * h < ROOT_TOL:
+        if f1 > 0.0 or f2 > 0.0 or (b - a) * h < ROOT_TOL or far_below(max(f1, f2), fa, fb):
             break
         if f1 > f2:
-            b, c2, f2 = c2, c1, f1
+            b, c2, f2, fb = c2, c1, f1, f2
             c1 = b - gr * (b - a)
             dense_head(c1, y0, q, h, work, m)
             f1 = value_at(fn, sign, p, work, M, contacts, kin)
         else:
-            a, c1, f1 = c1, c2, f2
+            a, c1, f1, fa = c1, c2, f2, f1
             c2 = a + gr * (b - a)
             dense_head(c2, y0, q, h, work, m)
             f2 = value_at(fn, sign, p, work, M, contacts, kin)
@@ -172,10 +180,10 @@ def find_event(y0, q, h, t0, M, contacts, near, n_near, kin, samples, values, wo
                 v = values[k, col]
                 if v > 0.0 or v < values[lo, col] or v < values[hi, col]:
                     continue
-                rise = (v - values[lo, col]) + (v - values[hi, col])
-                if v + 2.0 * rise <= 0.0:
-                    continue  # a local maximum far below zero: no graze here
-                th_m, vm = largest_on(fn, sg, p, lo / N_SAMPLES, hi / N_SAMPLES, y0, q, h, M, contacts, kin, work)
+                if far_below(v, values[lo, col], values[hi, col]):
+                    continue  # no graze here
+                th_m, vm = largest_on(fn, sg, p, lo / N_SAMPLES, hi / N_SAMPLES, values[lo, col], values[hi, col],
+                                      y0, q, h, M, contacts, kin, work)
                 if vm > 0.0:
                     root = locate_root(fn, sg, p, lo / N_SAMPLES, th_m, y0, q, h, M, contacts, kin, work, tol)
                     best = min(best, root)

@@ -19,10 +19,16 @@ def dense(theta, y0, q, h, out):
 def dense_head(theta, y0, q, h, out, m):
     """dense() for the first m components only (the angles and rates that events and forces need)."""
     for r in range(m):
-        acc = 0.0
-        for j in range(q.shape[1] - 1, -1, -1):
-            acc = (acc + q[r, j]) * theta
-        out[r] = y0[r] + h * acc
+        out[r] = dense_component(theta, y0, q, h, r)
+
+
+@inline
+def dense_component(theta, y0, q, h, r):
+    """Component r of dense(): y0[r] + h Σ_j Q[r, j] θ^(j+1), by Horner's rule."""
+    acc = 0.0
+    for j in range(q.shape[1] - 1, -1, -1):
+        acc = (acc + q[r, j]) * theta
+    return y0[r] + h * acc
 
 
 @jit
