@@ -162,3 +162,22 @@ def test_a_negative_pedicel_tension_is_explained_where_it_is_shown():
     from grapefmu.results import catalogue, plot
     assert "compression" in catalogue.channel("pedicel_tension").description
     assert "compressed" in inspect.getsource(plot)
+
+
+def test_contact_log_agrees_with_the_impact_book():
+    """A run keeps each pair's contact record as changes (results/contacts.py); 230 impacts overflow the recorder's
+    change log several times (its chunks are joined). A pair is in contact at exactly the samples inside one of its
+    impacts, onset < t ≤ end (a sample at a step's end holds the step's mode), and the log densifies to the records
+    it was made from."""
+    from grapefmu.bench.scenes import bench_scenes, build
+    from grapefmu.results.contacts import ContactLog
+
+    run = simulate(build(bench_scenes()["shaken stiff pair"]), rtol=1e-6, atol=1e-8, output_interval=1e-3)
+    assert len(run.impacts) > 200 and len(run.contact_log.changes) > 4 * 64
+    inside = np.zeros(len(run.t), bool)
+    for onset, end in zip(run.impacts.onset, run.impacts.end):
+        inside |= (run.t > onset) & (run.t <= end)
+    assert np.array_equal(run.mode[:, 0] != 0, inside)
+    assert np.array_equal(run.contacts["mode"], run.mode)
+    again = ContactLog.of(run.contacts)
+    assert np.array_equal(again.dense(len(run.t)), run.contacts)

@@ -16,6 +16,7 @@ from ..physics import observe as obs
 from ..physics.damage import detaching, fatigue, pair_bruise_thresholds
 from ..physics.layout import LEDGER_TERMS, Layout, angular_velocity, ledger, layout_of, orientation
 from . import catalogue, trust
+from .contacts import ContactLog
 from .impacts import Impacts
 
 
@@ -24,7 +25,7 @@ class Run:
     scene: Scene
     t: np.ndarray            # (S,) s
     y: np.ndarray            # (S, ny): physics/layout.py
-    contacts: np.ndarray     # (S, P) physics.forces.CONTACT: each pair's mode, onset speed, smooth flag
+    contact_log: ContactLog  # each pair's contact record (mode, onset speed, smooth flag) at the samples
     accel: np.ndarray        # (S, 6) physics.excitation.ACCEL_COMPONENTS of the rachis (m/s², rad/s², world frame)
     totals: np.ndarray       # (S,) records.TOTALS at each sample (as of the solver step before it)
     impacts: Impacts
@@ -64,10 +65,15 @@ class Run:
     def base_orientation(self) -> np.ndarray:
         return orientation(self.layout, self.y)
 
-    @property
+    @cached_property
+    def contacts(self) -> np.ndarray:
+        """(S, P) physics.forces.CONTACT: each pair's mode, onset speed and smooth flag at each sample."""
+        return self.contact_log.dense(len(self.t))
+
+    @cached_property
     def mode(self) -> np.ndarray:
-        """(S, P) contact modes: 0 apart, 1 loaded, 2 overlapping but unloaded."""
-        return self.contacts["mode"]
+        """(S, P) int8 contact modes: 0 apart, 1 loaded, 2 overlapping but unloaded."""
+        return self.contact_log.mode(len(self.t))
 
     @property
     def active_pairs(self) -> np.ndarray:

@@ -14,12 +14,14 @@ SAMPLE_COPIES = 5
 
 
 def sample_bytes(model) -> int:
-    """Bytes one output sample takes in the recorder (its arrays, so this follows the recorder's layout)."""
+    """Bytes one output sample takes in the recorder (its arrays, so this follows the recorder's layout), and in
+    each pair's contact record at it (the run's dense `contacts`, built when asked for)."""
+    from ..physics.forces import CONTACT
     from ..physics.layout import layout
-    from .state import recorder
+    from .state import SAMPLED, recorder
 
     ny = layout(model.n_berries, model.n_dof, len(model.couplings), turning=True).size  # the larger one
-    return sum(a.nbytes for a in recorder(1, ny, len(model.pairs), 0)[:5])
+    return sum(a.nbytes for a in recorder(1, ny, len(model.pairs), 0)[:SAMPLED]) + len(model.pairs) * CONTACT.itemsize
 
 
 def check_samples(model, t_end: float, output_interval: float, t_key: str = "solver.t_end",

@@ -17,6 +17,7 @@ from ..model.model import ContactPair, Coupling, Model, Scene
 from ..errors import SolverError
 from ..physics.forces import CONTACT
 from ..physics.layout import layout_of
+from ..results.contacts import CHANGE, ContactLog
 from ..results.impacts import Impacts
 from ..results.records import TOTALS, concat
 from ..results.run import Run
@@ -79,7 +80,7 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
     t = runs[0].t
     n, npair = len(t), len(m.pairs)
     y = np.zeros((n, lay.size))
-    contacts = np.zeros((n, npair), dtype=CONTACT)
+    start, changes = np.zeros(npair, dtype=CONTACT), []
     totals = np.zeros(n, dtype=TOTALS)
     totals["peak_pedicel_tension"] = -np.inf
     peak_force, peak_tension = np.zeros(npair), np.zeros(m.n_berries)
@@ -104,7 +105,10 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
         body = members + list(range(m.n_berries, m.n_berries + len(m.obstacles)))  # group's body -> scene's
         glob = np.array([pair_index[(body[p.i], body[p.j])] for p in run.scene.model.pairs], dtype=int)
         if len(glob):
-            contacts[:, glob] = run.contacts
+            start[glob] = run.contact_log.start
+            ch = run.contact_log.changes.copy()
+            ch["pair"] = glob[ch["pair"]]
+            changes.append(ch)
             peak_force[glob] = run.peak_force
         peak_tension[members] = run.peak_tension
         for f in ("collision_count", "bruising_impacts", "berries_over_detachment_force"):
@@ -124,4 +128,6 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
         stats["near_pairs_mean"] = sum(r.stats["near_pairs_mean"] * r.stats["steps"] for r in runs) / max(stats["steps"], 1)
     stats["groups"] = len(parts)
     impacts = Impacts.from_records(concat(finished), concat(ongoing))
-    return Run(scene, t, y, contacts, runs[0].accel, totals, impacts, peak_force, peak_tension, stats)
+    changes = concat(changes) if changes else np.zeros(0, CHANGE)
+    log = ContactLog(start, changes[np.argsort(changes["sample"], kind="stable")])
+    return Run(scene, t, y, log, runs[0].accel, totals, impacts, peak_force, peak_tension, stats)

@@ -11,7 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..physics.compiled import jit
+from ..physics.compiled import inline, jit
 from ..physics.dynamics import rhs
 from ..physics.excitation import applied_accel
 from ..physics.kinematics import Workspace, kinematics, workspace
@@ -53,17 +53,43 @@ def buffers(M, ny):
                    samples_for(M), np.zeros((M.berry.shape[0], 2)))
 
 
+@inline
+def differs(c, d):
+    """Whether two CONTACT records differ."""
+    return c.mode != d.mode or c.v_onset != d.v_onset or c.smooth != d.smooth
+
+
 @jit
 def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
-    """Samples on the output grid in (t0, t_commit]. Returns False when the recorder is full."""
+    """Samples on the output grid in (t0, t_commit], and each pair whose contact record the samples hold differs
+    from the one logged before (results/contacts.py). Returns False when the recorder is full."""
     cur = R.cursor[0]
     dt_out = cur.grid_dt
     kg = cur.grid_k
     last = int(math.floor((t_commit - cur.grid_t0) / dt_out + 1e-9))
+    if last < kg:
+        return True
     if last - kg + 1 > R.t.shape[0] - cur.n_out:
         return False
-    ts, ys, cs, accels, tots = R.t, R.y, R.contacts, R.accel, R.totals
+    logged = R.logged
+    new = 0
+    for p in range(contacts.shape[0]):
+        if differs(contacts[p], logged[p]):
+            new += 1
+    if new > R.changes.shape[0] - cur.n_changes:
+        return False
     o = cur.n_out
+    if new > 0:
+        n = cur.n_changes
+        for p in range(contacts.shape[0]):
+            c, d = contacts[p], logged[p]
+            if differs(c, d):
+                row = R.changes[n]
+                row.sample, row.pair, row.mode, row.v_onset, row.smooth = o, p, c.mode, c.v_onset, c.smooth
+                d.mode, d.v_onset, d.smooth = c.mode, c.v_onset, c.smooth
+                n += 1
+        cur.n_changes = n
+    ts, ys, accels, tots = R.t, R.y, R.accel, R.totals
     while kg <= last:
         tg = min(cur.grid_t0 + kg * dt_out, t_commit)
         theta = (tg - t0) / h
@@ -72,8 +98,6 @@ def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
         ts[o] = tg
         accels[o, 0], accels[o, 1], accels[o, 2], accels[o, 3], accels[o, 4], accels[o, 5] = applied_accel(
             X, inp, tg, t0)
-        for p in range(contacts.shape[0]):
-            cs[o, p] = contacts[p]
         tots[o] = totals[0]
         o += 1
         kg += 1

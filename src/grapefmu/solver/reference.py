@@ -27,6 +27,7 @@ from ..physics.compiled import jit
 from ..physics.forces import CONTACT, pair_force
 from ..physics.kinematics import pair_state, workspace
 from ..physics.layout import initial, layout_of
+from ..results.contacts import ContactLog
 from ..results.impacts import IMPACT, Impacts
 from ..results.records import TOTALS
 from ..results.run import Run
@@ -164,7 +165,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     n_open = len(open_imp)
     impacts = Impacts.from_records(table[: len(rows) - n_open], table[len(rows) - n_open:])
     tt = np.concatenate(out_t)
-    run = Run(scene, tt, np.concatenate(out_y)[:, :ny], np.concatenate(out_contacts).reshape(len(tt), npair),
+    run = Run(scene, tt, np.concatenate(out_y)[:, :ny], ContactLog.of(np.concatenate(out_contacts).reshape(len(tt), npair)),
               np.concatenate(out_acc), np.zeros(len(tt), dtype=TOTALS),
               impacts, peak_force, np.zeros(m.n_berries),
               {"method": f"reference ({integrator})", "rhs_evaluations": nfev, "segments": segments, "wall_time": wall})

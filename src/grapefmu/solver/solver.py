@@ -24,6 +24,7 @@ from ..physics.excitation import ACCEL_COMPONENTS, INPUT, base_accel
 from ..physics.kinematics import kinematics, workspace
 from ..physics.layout import LEDGER_TERMS, angular_velocity, initial, ledger, layout_of, orientation
 from ..results import catalogue
+from ..results.contacts import ContactLog
 from ..results.impacts import Impacts
 from ..results.records import concat
 from ..results.run import Run
@@ -340,10 +341,13 @@ class Solver:
         rec = st.recorder(n_expected + 1, self.layout.size, npair, max(npair, 1) * 256)
         cur = rec.cursor
         cur["grid_t0"], cur["grid_dt"], cur["grid_k"], cur["n_out"] = self.t, dt_out, 1, 1
-        rec.t[0], rec.y[0], rec.contacts[0] = self.t, self.state.physical.y, self.state.physical.contacts
+        rec.t[0], rec.y[0] = self.t, self.state.physical.y
         rec.accel[0], rec.totals[0] = self.base_accel, self.state.book.totals[0]
+        start = self.state.physical.contacts.copy()
+        rec.logged[:] = start
         t_start = self.t
-        chunks, impacts = [], []  # what a full recorder handed over (rare: it is sized for the whole run)
+        chunks, changes, impacts = [], [], []  # what a full recorder handed over (rare: it is sized for the whole run)
+        offset = 0  # samples handed over
         wall = time.perf_counter()
         chunk, steps = 5000, 0
         while True:
@@ -353,8 +357,11 @@ class Solver:
                 cur["n_impacts"] = 0
                 continue
             if status == OUT_FULL:
-                chunks.append(tuple(a[: int(cur["n_out"][0])].copy() for a in rec[:5]))
-                cur["n_out"] = 0
+                n = int(cur["n_out"][0])
+                chunks.append(tuple(a[:n].copy() for a in rec[:st.SAMPLED]))
+                changes.append(self._changes(rec, offset))
+                offset += n
+                cur["n_out"], cur["n_changes"] = 0, 0
                 continue
             if status == MAX_STEPS:
                 steps += chunk
@@ -368,14 +375,22 @@ class Solver:
         wall = time.perf_counter() - wall
         if progress:
             progress(self.t, t_end)
-        chunks.append(tuple(a[: int(cur["n_out"][0])] for a in rec[:5]))
+        chunks.append(tuple(a[: int(cur["n_out"][0])] for a in rec[:st.SAMPLED]))
+        changes.append(self._changes(rec, offset))
         impacts.append(rec.impacts[: int(cur["n_impacts"][0])])
-        t, y, contacts, accel, totals = (concat([c[i] for c in chunks]) for i in range(5))
+        t, y, accel, totals = (concat([c[i] for c in chunks]) for i in range(st.SAMPLED))
         stats = self.stats | {"wall_time": wall, "method": self.method, "t_start": t_start, "rtol": self.rtol,
                               "atol": self.atol, "fixed_step": self.fixed_step}
-        return Run(self.scene, t, y, contacts, accel, totals,
+        return Run(self.scene, t, y, ContactLog(start, concat(changes)), accel, totals,
                    Impacts.from_records(concat(impacts), self._open_impacts()),
                    self.state.book.pair["peak_force"].copy(), self.state.book.peak_tension.copy(), stats)
+
+    @staticmethod
+    def _changes(rec: st.Recorder, offset: int) -> np.ndarray:
+        """The contact changes a recorder holds, their sample indices counted from the run's first sample."""
+        out = rec.changes[: int(rec.cursor["n_changes"][0])].copy()
+        out["sample"] += offset
+        return out
 
     def _open_impacts(self) -> np.ndarray:
         """The impacts still going on, as rows that end now (separation speed NaN)."""

@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import StateError
 from ..physics.excitation import INPUT
 from ..physics.forces import CONTACT
+from ..results.contacts import CHANGE
 from ..results.records import IMPACT, TOTALS
 
 __all__ = ["BOOK_COUNTERS", "BOOK_PAIR", "CONFIG", "CONTACT", "IMPACT", "INPUT", "TOTALS", "Book", "BroadPhase",
@@ -38,7 +39,8 @@ BOOK_PAIR = np.dtype([("onset", "f8"), ("approach_speed", "f8"), ("impact_peak",
                       ("smooth_until", "f8"),   # s; inf: smooth for good (a smooth law under step-size control)
                       ("ring_pos", "i8")], align=True)
 #: the output grid's cursor
-CURSOR = np.dtype([("grid_t0", "f8"), ("grid_dt", "f8"), ("grid_k", "i8"), ("n_out", "i8"), ("n_impacts", "i8")])
+CURSOR = np.dtype([("grid_t0", "f8"), ("grid_dt", "f8"), ("grid_k", "i8"), ("n_out", "i8"), ("n_impacts", "i8"),
+                   ("n_changes", "i8")])
 
 
 class Physical(NamedTuple):
@@ -91,22 +93,29 @@ _GROUPS = {"physical": Physical, "integrator": Integrator, "book": Book, "broad_
 
 
 class Recorder(NamedTuple):
-    """Where a run's samples and finished impacts go (not part of the state)."""
+    """Where a run's samples, contact changes and finished impacts go (not part of the state). The samples' arrays
+    come first (SAMPLED of them)."""
 
     t: np.ndarray          # (cap,)
     y: np.ndarray          # (cap, ny)
-    contacts: np.ndarray   # (cap, P) CONTACT
     accel: np.ndarray      # (cap, 6) ACCEL_COMPONENTS
     totals: np.ndarray     # (cap,) TOTALS
+    changes: np.ndarray    # (cap_changes,) results.contacts.CHANGE, the sample index within this recorder
+    logged: np.ndarray     # (P,) CONTACT: each pair's record as the samples from its last change on hold it
     impacts: np.ndarray    # (cap_impacts,) IMPACT
     cursor: np.ndarray     # (1,) CURSOR
+
+
+#: the recorder's arrays with a row per sample
+SAMPLED = 4
 
 
 def recorder(cap: int, ny: int, npair: int, cap_impacts: int) -> Recorder:
     """Rows are read only up to the cursor's counts, each written whole before (record_grid, switch_pair): left
     uninitialised, as zero-filling a run's worth of structured rows cost more than a short run's steps."""
-    return Recorder(np.empty(cap), np.empty((cap, ny)), np.empty((cap, npair), dtype=CONTACT), np.empty((cap, 6)),
-                    np.empty(cap, dtype=TOTALS), np.empty(cap_impacts, dtype=IMPACT), np.zeros(1, dtype=CURSOR))
+    return Recorder(np.empty(cap), np.empty((cap, ny)), np.empty((cap, 6)), np.empty(cap, dtype=TOTALS),
+                    np.empty(max(4 * npair, 64), dtype=CHANGE), np.zeros(npair, dtype=CONTACT),
+                    np.empty(cap_impacts, dtype=IMPACT), np.zeros(1, dtype=CURSOR))
 
 
 def _walk(tree, prefix=""):
