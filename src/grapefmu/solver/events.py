@@ -107,30 +107,61 @@ def far_below(v, v_left, v_right):
 
 @jit
 def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work):
-    """Golden-section search for the largest sign·fn on [a, b] (θ units; fa, fb its values there): returns (θ, value)
-    once a value is positive, the bracket is ROOT_TOL wide, or the maximum is far below zero."""
+    """The largest sign·fn on [a, b] (θ units; fa, fb its values there), by Brent's method (parabolic steps, golden
+    ones where a parabola does not help): returns (θ, value) once a value is positive, the bracket is ROOT_TOL wide,
+    or the largest is far below zero. A graze is a smooth maximum, so the parabolic steps converge in a few
+    evaluations where golden sections alone took thirty to forty."""
     m = model_head(M)  # the head of y: angles, rates and the rachis motion
-    gr = 0.6180339887498949
-    c1 = b - gr * (b - a)
-    c2 = a + gr * (b - a)
-    dense_head(c1, y0, q, h, work, m)
-    f1 = value_at(fn, sign, p, work, M, contacts, kin)
-    dense_head(c2, y0, q, h, work, m)
-    f2 = value_at(fn, sign, p, work, M, contacts, kin)
+    cg = 0.3819660112501051  # golden section, 1 − 1/φ
+    tol = ROOT_TOL / h
+    x = w = v = a + cg * (b - a)
+    dense_head(x, y0, q, h, work, m)
+    fx = value_at(fn, sign, p, work, M, contacts, kin)
+    fw = fv = fx
+    d = e = 0.0
     for _ in range(60):
-        if f1 > 0.0 or f2 > 0.0 or (b - a) * h < ROOT_TOL or far_below(max(f1, f2), fa, fb):
+        if fx > 0.0 or far_below(fx, fa, fb):
             break
-        if f1 > f2:
-            b, c2, f2, fb = c2, c1, f1, f2
-            c1 = b - gr * (b - a)
-            dense_head(c1, y0, q, h, work, m)
-            f1 = value_at(fn, sign, p, work, M, contacts, kin)
+        xm = 0.5 * (a + b)
+        tol1 = tol + 1e-15 * abs(x)
+        if abs(x - xm) <= 2.0 * tol1 - 0.5 * (b - a):
+            break
+        golden = True
+        if abs(e) > tol1:  # a parabola through x, w, v (maximising: the signs of scipy's minimiser turned)
+            r = (x - w) * (fv - fx)
+            t = (x - v) * (fw - fx)
+            num = (x - v) * t - (x - w) * r
+            den = 2.0 * (t - r)
+            if den > 0.0:
+                num = -num
+            den = abs(den)
+            if abs(num) < abs(0.5 * den * e) and den * (a - x) < num < den * (b - x):
+                e, d = d, num / den
+                golden = False
+                if (x + d) - a < 2.0 * tol1 or b - (x + d) < 2.0 * tol1:
+                    d = tol1 if xm >= x else -tol1
+        if golden:
+            e = (a - x) if x >= xm else (b - x)
+            d = cg * e
+        u = x + (d if abs(d) >= tol1 else (tol1 if d > 0.0 else -tol1))
+        dense_head(u, y0, q, h, work, m)
+        fu = value_at(fn, sign, p, work, M, contacts, kin)
+        if fu >= fx:
+            if u >= x:
+                a, fa = x, fx
+            else:
+                b, fb = x, fx
+            v, fv, w, fw, x, fx = w, fw, x, fx, u, fu
         else:
-            a, c1, f1, fa = c1, c2, f2, f1
-            c2 = a + gr * (b - a)
-            dense_head(c2, y0, q, h, work, m)
-            f2 = value_at(fn, sign, p, work, M, contacts, kin)
-    return (c1, f1) if f1 > f2 else (c2, f2)
+            if u < x:
+                a, fa = u, fu
+            else:
+                b, fb = u, fu
+            if fu >= fw or w == x:
+                v, fv, w, fw = w, fw, u, fu
+            elif fu >= fv or v == x or v == w:
+                v, fv = u, fu
+    return x, fx
 
 
 @jit

@@ -104,14 +104,19 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
                 # where the peak may sit just inside this step)
                 a = theta_end * max(kbest - 1, 0) / N_SAMPLES
                 b = theta_end * min(kbest + 1, N_SAMPLES) / N_SAMPLES
-                for _ in range(40):
-                    c1 = b - GOLDEN * (b - a)
-                    c2 = a + GOLDEN * (b - a)
-                    if force_at(c1, p, y0, q, h, M, contacts, kin, work) > force_at(c2, p, y0, q, h, M, contacts,
-                                                                                     kin, work):
-                        b = c2
+                c1 = b - GOLDEN * (b - a)
+                c2 = a + GOLDEN * (b - a)
+                f1 = force_at(c1, p, y0, q, h, M, contacts, kin, work)
+                f2 = force_at(c2, p, y0, q, h, M, contacts, kin, work)
+                for _ in range(40):  # one new point a round: the kept one is the next round's other point
+                    if f1 > f2:
+                        b, c2, f2 = c2, c1, f1
+                        c1 = b - GOLDEN * (b - a)
+                        f1 = force_at(c1, p, y0, q, h, M, contacts, kin, work)
                     else:
-                        a = c1
+                        a, c1, f1 = c1, c2, f2
+                        c2 = a + GOLDEN * (b - a)
+                        f2 = force_at(c2, p, y0, q, h, M, contacts, kin, work)
                     if (b - a) * h < 1e-12:
                         break
                 tm = 0.5 * (a + b)
