@@ -21,7 +21,7 @@ from .sampling import sample_step
 from .step import dense, dense_coefficients, dense_component, error_norm, initial_step, rk_step
 
 # statuses
-DONE, OUT_FULL, IMPACTS_FULL, MAX_STEPS, STEP_UNDERFLOW, NOT_FINITE = range(6)
+DONE, OUT_FULL, IMPACTS_FULL, MAX_STEPS, STEP_UNDERFLOW, NOT_FINITE, REFUSED = range(7)  # REFUSED: session.advance
 
 
 class Buffers(NamedTuple):

@@ -11,13 +11,14 @@ from numba.core import types
 from numba.experimental import structref
 from numba.extending import overload
 
+from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from ..physics.compiled import jit
 from ..physics.dynamics import rhs
 from ..physics.excitation import applied_accel
 from ..physics.layout import model_offsets
 from ..physics.kinematics import workspace
 from ..physics.observe import observe
-from .loop import integrate
+from .loop import REFUSED, integrate
 
 __all__ = ["Session", "advance", "derivative", "new", "refresh", "resume"]
 
@@ -75,7 +76,20 @@ def derivative(S, M, X):
 def advance(s, dt, held, a, omega_set, omega, max_steps):
     """Save the state, hold the input (held, a: ACCEL_COMPONENTS), set the rachis' angular velocity to omega
     (world, rad/s) if omega_set, integrate dt. Returns (status, t_target, finished impacts in the scratch
-    recorder); the caller restores the state (memory <- backup) if the status is a failure."""
+    recorder); the caller restores the state (memory <- backup) if the status is a failure. REFUSED, with the
+    state untouched, for an input out of its bounds (model/excitation.py) or a turn of a rachis that does not
+    turn: the caller says which (one check here, in the call a face makes every step, instead of in Python)."""
+    for k in range(6):
+        bound = MAX_ACCEL if k < 3 else MAX_ANGULAR_ACCEL
+        if not (-bound <= a[k] <= bound):
+            return REFUSED, 0.0, 0
+    if omega_set:
+        for k in range(3):
+            if not (-MAX_ANGULAR_VELOCITY <= omega[k] <= MAX_ANGULAR_VELOCITY):
+                return REFUSED, 0.0, 0
+    if not s.model.turning and (a[3] != 0.0 or a[4] != 0.0 or a[5] != 0.0 or (omega_set and (
+            omega[0] != 0.0 or omega[1] != 0.0 or omega[2] != 0.0))):
+        return REFUSED, 0.0, 0
     s.backup[:] = s.memory
     S = s.state
     inp = S.input[0]

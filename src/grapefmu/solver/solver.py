@@ -32,7 +32,7 @@ from . import session as ses
 from . import state as st
 from .broadphase import rebuild
 from .events import classify, open_impact
-from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, STEP_UNDERFLOW, buffers, integrate
+from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW, buffers, integrate
 from .tableau import BOGACKI_SHAMPINE, DOPRI5
 
 #: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
@@ -280,28 +280,23 @@ class Solver:
             held, a = False, _NO_ACCEL
         else:
             held, a = True, base_accel
-            if not (type(a) is tuple and len(a) == 6 and all(type(v) is float and -MAX_ACCEL <= v <= MAX_ACCEL
-                                                             for v in a)):
+            if type(a) is not tuple or len(a) != 6 or not (
+                    type(a[0]) is float is type(a[1]) is type(a[2]) is type(a[3]) is type(a[4]) is type(a[5])):
                 a = _held_accel(base_accel)
         if angular_velocity is None:
             omega_set, omega = False, _NO_OMEGA
         else:
             omega_set, omega = True, angular_velocity
-            if not (type(omega) is tuple and len(omega) == 3 and all(
-                    type(v) is float and -MAX_ANGULAR_VELOCITY <= v <= MAX_ANGULAR_VELOCITY for v in omega)):
+            if type(omega) is not tuple or len(omega) != 3 or not (
+                    type(omega[0]) is float is type(omega[1]) is type(omega[2])):
                 omega = _angular_velocity(angular_velocity)
-        if not self.layout.turning and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
-            raise SolverError("base_accel, angular_velocity: this solver's rachis does not turn (its scene does "
-                              "not turn it); build it with Solver(scene, turning=True) to drive rotation as an input")
-        n = self._plane_normal
-        if n is not None and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]) and (
-                off_axis(a[3:], n) or off_axis(omega, n)):
-            name = "base_accel" if off_axis(a[3:], n) else "angular_velocity"
-            raise SolverError(f"{name}: a planar cluster turns only about the rachis' y axis "
-                              f"{tuple(round(float(c), 6) for c in n)} (world; normal to its plane), got "
-                              f"{a[3:] if name == 'base_accel' else omega} (use spherical berries for any rotation)")
+        if self._plane_normal is not None and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
+            self._check_input(a, omega)  # ranges first, then the plane
         kept = len(self._closed)
         status, t_target, n_impacts = ses.advance(self._session, dt, held, a, omega_set, omega, self.max_steps)
+        if status == REFUSED:
+            self._check_input(a, omega)
+            raise SolverError(f"base_accel, angular_velocity: {a}, {omega} refused")  # _check_input said why
         while n_impacts:
             self._closed_into(self._scratch)
             if status != IMPACTS_FULL:
@@ -310,6 +305,21 @@ class Solver:
         if status != DONE:
             del self._closed[kept:]
             self._fail(status)
+
+    def _check_input(self, a: tuple[float, ...], omega: tuple[float, float, float]) -> None:
+        """Refuse advance()'s input, naming what is wrong: a value out of its bounds (model/excitation.py), a turn
+        of a rachis that does not turn, or, in a planar scene, a turn about another axis than the rachis' y."""
+        _held_accel(a)
+        _angular_velocity(omega)
+        if not self.layout.turning and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
+            raise SolverError("base_accel, angular_velocity: this solver's rachis does not turn (its scene does "
+                              "not turn it); build it with Solver(scene, turning=True) to drive rotation as an input")
+        n = self._plane_normal
+        if n is not None and (off_axis(a[3:], n) or off_axis(omega, n)):
+            name = "base_accel" if off_axis(a[3:], n) else "angular_velocity"
+            raise SolverError(f"{name}: a planar cluster turns only about the rachis' y axis "
+                              f"{tuple(round(float(c), 6) for c in n)} (world; normal to its plane), got "
+                              f"{a[3:] if name == 'base_accel' else omega} (use spherical berries for any rotation)")
 
     def take_impacts(self) -> Impacts:
         """Impacts that ended since the last call (during step() or advance()), oldest first."""
