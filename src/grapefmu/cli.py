@@ -358,7 +358,8 @@ class Help(argparse.HelpFormatter):
         return f"{text} (default: %(default)s)"
 
 
-METHODS = ("event: adaptive Dormand–Prince 5(4), every contact onset and release located exactly (the default); "
+METHODS = ("event: adaptive Dormand–Prince 5(4), 8(5,3) below rtol 1e-7, every contact onset and release located "
+           "exactly (the default); "
            "paper: the paper's ode23 with contacts checked only at step ends, cross-checked against event; "
            "reference: scipy solve_ivp (DOP853) with scipy's event location, slow, an independent check "
            "(docs/solver.md)")

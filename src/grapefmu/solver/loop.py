@@ -173,7 +173,8 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
                 if clk.h < 1e-15 * max(1.0, abs(t0)) * 16:
                     return STEP_UNDERFLOW if math.isfinite(en) else NOT_FINITE
                 continue
-        dense_coefficients(TB, I.stages, I.dense, acc)
+        dense_coefficients(t0, h, P.y, args, TB, I.stages, I.dense, tmp, acc)
+        cnt.rhs_evaluations += TB.c_extra.shape[0]
         q = I.dense
         # --- broad phase, then the earliest contact switch inside the step: none to look for on a quiet step
         far = quiet(P.y, q, h, M, C, B, cfg, samples[0], Z.travel) if npair > 0 else 0.0

@@ -14,8 +14,16 @@ from ..physics.layout import model_head
 from .events import N_SAMPLES, check_bruising, classify
 from .step import dense_head
 
-#: Boole's rule on the N_SAMPLES + 1 equally spaced samples: exact for quintics like the step's dense output
+#: Boole's rule on the N_SAMPLES + 1 equally spaced samples: exact for quintics; its error per step,
+#: O(h^7), stays below DOPRI5's local error O(h^6)
 BOOLE = np.array([7.0, 32.0, 12.0, 32.0, 7.0]) / 90.0
+#: Gauss–Legendre on N_SAMPLES + 1 nodes in [0, 1] (exact to degree 9, error O(h^11)), for a dense output of
+#: higher degree than Boole's rule is exact for. DOP853's steps are 5..10 times longer than DOPRI5's: with
+#: Boole's rule its booked dissipation missed the energy ledger by 1.6e-6..5.9e-9 (relative; the ledger's
+#: dissipative case at rtol 1e-8..1e-11) where DOPRI5's misses by 1.5e-8..2.7e-10; on these nodes,
+#: 6.3e-9..1.7e-11. It costs N_SAMPLES + 1 more force evaluations on a step with a pair in contact.
+_NODES, _WEIGHTS = np.polynomial.legendre.leggauss(N_SAMPLES + 1)  # on [-1, 1]
+GAUSS_X, GAUSS_W = 0.5 * (_NODES + 1.0), 0.5 * _WEIGHTS
 GOLDEN = 0.6180339887498949
 
 
@@ -29,10 +37,45 @@ def force_at(theta, p, y0, q, h, M, contacts, kin, work):
 
 
 @jit
+def integrate_gauss(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, book_pair, W, work, fbuf, pwbuf):
+    """Book the active near pairs' impulse and dissipation over the step on the Gauss nodes (fbuf and pwbuf
+    as scratch, before the samples fill them). Returns whether it did: False when no near pair is active."""
+    any_active = False
+    for kk in range(nnear):
+        if active(contacts[near[kk]]):
+            any_active = True
+    if not any_active:
+        return False
+    span = theta_end * h
+    for k in range(N_SAMPLES + 1):
+        th = theta_end * GAUSS_X[k]
+        dense_head(th, y0, q, h, work, model_head(M))
+        forces(applied_accel(X, inp, t0 + th * h, t0), kinematics(work, M, W.berry), contacts, M, W, near, nnear)
+        for kk in range(nnear):
+            fbuf[k, kk] = W.pair[kk].force
+            pwbuf[k, kk] = W.pair[kk].power
+    for kk in range(nnear):
+        p = near[kk]
+        if not active(contacts[p]):
+            continue
+        fi = 0.0
+        pi = 0.0
+        for k in range(N_SAMPLES + 1):
+            fi += GAUSS_W[k] * fbuf[k, kk]
+            pi += GAUSS_W[k] * pwbuf[k, kk]
+        book_pair[p].impulse += span * fi
+        book_pair[p].dissipated += span * pi
+    return True
+
+
+@jit
 def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, totals, book_pair, peak_tension, cfg, W,
                 work, fbuf, pwbuf, cls):
     tot = totals[0]
     berry, kin = M.berry, W.berry
+    span = theta_end * h
+    gauss = q.shape[1] > 5 and integrate_gauss(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, book_pair,
+                                                W, work, fbuf, pwbuf)
     for k in range(N_SAMPLES + 1):
         th = theta_end * k / N_SAMPLES
         dense_head(th, y0, q, h, work, model_head(M))
@@ -53,20 +96,20 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
                 peak_tension[i] = tension
                 if tension > tot.peak_pedicel_tension:
                     tot.peak_pedicel_tension = tension
-    span = theta_end * h
     for kk in range(nnear):
         p = near[kk]
         c = contacts[p]
         if not active(c):
             continue
         bp = book_pair[p]
-        fi = 0.0
-        pi = 0.0
-        for k in range(N_SAMPLES + 1):
-            fi += BOOLE[k] * fbuf[k, kk]
-            pi += BOOLE[k] * pwbuf[k, kk]
-        bp.impulse += span * fi
-        bp.dissipated += span * pi
+        if not gauss:
+            fi = 0.0
+            pi = 0.0
+            for k in range(N_SAMPLES + 1):
+                fi += BOOLE[k] * fbuf[k, kk]
+                pi += BOOLE[k] * pwbuf[k, kk]
+            bp.impulse += span * fi
+            bp.dissipated += span * pi
         kbest = 0
         kmin = 0
         for k in range(1, N_SAMPLES + 1):

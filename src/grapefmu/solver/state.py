@@ -56,7 +56,7 @@ class Integrator(NamedTuple):
 
     f: np.ndarray          # dy/dt at the current state
     y_prev: np.ndarray     # the state at the last step's start
-    stages: np.ndarray     # (s + 1, ny)
+    stages: np.ndarray     # (S, ny): every stage the dense output combines (Tableau.p)
     dense: np.ndarray      # (ny, k): the last step's interpolant coefficients
     clock: np.ndarray      # (1,) CLOCK
 

@@ -106,20 +106,45 @@ def rk_step(t0, h, t_new, y, f, args, TB, stages, ynew, tmp, acc):
 
 @inline
 def error_norm(h, y, ynew, TB, stages, cfg, err, scale, acc):
-    """The embedded estimate's RMS norm against atol + rtol·max(|y|, |y_new|) (inf if y_new is not finite)."""
+    """The embedded estimate's RMS norm against atol + rtol·max(|y|, |y_new|) (inf if y_new is not finite).
+    With a third-order estimate (DOP853) the fifth-order one is tempered by it as in scipy:
+    |h|·‖e5‖² / √((‖e5‖² + 0.01‖e3‖²)·n), so a fifth-order estimate that vanishes by accident does not pass."""
     for r in range(ynew.shape[0]):
         if not math.isfinite(ynew[r]):
             return np.inf
-    combine(TB.e, stages, TB.b.shape[0] + 1, acc)
+    n_fsal = TB.b.shape[0] + 1
+    combine(TB.e, stages, n_fsal, acc)
     for r in range(y.shape[0]):
         err[r] = h * acc[r]
         scale[r] = cfg.atol + cfg.rtol * max(abs(y[r]), abs(ynew[r]))
-    return rms_norm(err, scale)
+    if TB.e3.shape[0] == 0:
+        return rms_norm(err, scale)
+    s5 = 0.0
+    for r in range(y.shape[0]):
+        s5 += (err[r] / scale[r]) ** 2
+    combine(TB.e3, stages, n_fsal, acc)
+    s3 = 0.0
+    for r in range(y.shape[0]):
+        s3 += (h * acc[r] / scale[r]) ** 2
+    if s5 == 0.0 and s3 == 0.0:
+        return 0.0
+    return s5 / math.sqrt((s5 + 0.01 * s3) * y.shape[0])
 
 
 @inline
-def dense_coefficients(TB, stages, q, acc):
+def dense_coefficients(t0, h, y, args, TB, stages, q, tmp, acc):
+    """q of the accepted step (dense()). DOP853's interpolant first needs its extra stages, evaluated here
+    after the FSAL one (stages[s + 1 + i]; TB.c_extra.shape[0] more right-hand sides, which the caller counts)."""
+    C, M, X, inp, W, pairs, n_pairs = args
+    ny = y.shape[0]
+    first = TB.b.shape[0] + 1
+    for i in range(TB.c_extra.shape[0]):
+        st = first + i
+        combine(TB.a_extra[i], stages, st, acc)
+        for r in range(ny):
+            tmp[r] = y[r] + h * acc[r]
+        rhs_inline(t0 + TB.c_extra[i] * h, t0, tmp, stages[st], C, M, X, inp, W, pairs, n_pairs)
     for j in range(TB.p.shape[1]):
-        combine(TB.p[:, j], stages, TB.b.shape[0] + 1, acc)
+        combine(TB.p[:, j], stages, TB.p.shape[0], acc)
         for r in range(acc.shape[0]):
             q[r, j] = acc[r]

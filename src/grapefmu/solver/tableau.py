@@ -1,13 +1,17 @@
 """Butcher tableaux with embedded error estimates and continuous extensions (as in scipy.integrate).
 
-Dormand–Prince 5(4) drives the event-driven solver; Bogacki–Shampine 3(2), MATLAB's ode23,
-drives the imitation of the paper's method.
+Dormand–Prince 5(4) drives the event-driven solver at loose tolerances and Dormand–Prince 8(5,3)
+(DOP853) at tight ones (solver.Solver picks by rtol); Bogacki–Shampine 3(2), MATLAB's ode23, drives
+the imitation of the paper's method. All share one type (the tableau travels into compiled code):
+a field a pair does not use is an empty array, and the compiled side branches on its shape.
 """
 from __future__ import annotations
 
 from typing import NamedTuple
 
 import numpy as np
+from numpy.polynomial import polynomial as npoly
+from scipy.integrate._ivp import dop853_coefficients as d853
 
 
 class Tableau(NamedTuple):
@@ -15,9 +19,15 @@ class Tableau(NamedTuple):
     b: np.ndarray       # (s,)
     c: np.ndarray       # (s,)
     e: np.ndarray       # (s + 1,) error weights, last one for the FSAL stage
-    p: np.ndarray       # (s + 1, k) dense-output polynomial coefficients
+    p: np.ndarray       # (S, k) dense-output polynomial coefficients over all S stages (S = s + 1 + m)
     order: int          # order of the propagated solution
     error_order: int    # order of the embedded estimate
+    e3: np.ndarray      # (s + 1,) DOP853's third-order estimate, which tempers the fifth's (empty otherwise)
+    a_extra: np.ndarray  # (m, S) the m stages only the dense output needs, after the FSAL stage ((0, 0) if none)
+    c_extra: np.ndarray  # (m,)
+
+
+NO_E3, NO_A_EXTRA, NO_C_EXTRA = np.zeros(0), np.zeros((0, 0)), np.zeros(0)
 
 
 DOPRI5 = Tableau(
@@ -40,6 +50,7 @@ DOPRI5 = Tableau(
         [0, 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423]]),
     order=5,
     error_order=4,
+    e3=NO_E3, a_extra=NO_A_EXTRA, c_extra=NO_C_EXTRA,
 )
 
 BOGACKI_SHAMPINE = Tableau(
@@ -50,4 +61,40 @@ BOGACKI_SHAMPINE = Tableau(
     p=np.array([[1, -4 / 3, 5 / 9], [0, 1, -2 / 3], [0, 4 / 3, -8 / 9], [0, -1, 1]]),
     order=3,
     error_order=2,
+    e3=NO_E3, a_extra=NO_A_EXTRA, c_extra=NO_C_EXTRA,
 )
+
+
+def _dop853_dense() -> np.ndarray:
+    """DOP853's interpolant in the power basis every tableau's dense output uses: (y(t0 + θh) − y0)/h =
+    Σ_j Q_j θ^(j+1) with Q = Kᵀ P over the 16 stages K. scipy writes it (Dop853DenseOutput) as
+    θ(F0 + (1−θ)(F1 + θ(F2 + (1−θ)(F3 + θ(F4 + (1−θ)(F5 + θ F6)))))) with F0 = Δy, F1 = h f0 − Δy,
+    F2 = 2Δy − h(f0 + f1), F3..6 = h D K; every F is h times a combination of the stages."""
+    n_all, s = d853.N_STAGES_EXTENDED, d853.N_STAGES
+    b = np.zeros(n_all)
+    b[:s] = d853.B
+    f0, f1 = np.eye(n_all)[0], np.eye(n_all)[s]
+    F = np.vstack([b, f0 - b, 2 * b - f0 - f1, d853.D])        # (7, 16): F_i / h in the stages
+    x, one_minus = np.array([0.0, 1.0]), np.array([1.0, -1.0])
+    basis, poly = [], np.array([1.0])
+    for i in range(F.shape[0]):                                 # θ, θ(1−θ), θ²(1−θ), θ²(1−θ)², ...
+        poly = npoly.polymul(poly, x if i % 2 == 0 else one_minus)
+        basis.append(np.pad(poly, (0, d853.INTERPOLATOR_POWER + 1 - poly.size))[1:])
+    return np.ascontiguousarray(F.T @ np.array(basis))         # (16, 7): powers θ^1..θ^7
+
+
+DOP853 = Tableau(
+    a=np.ascontiguousarray(d853.A[:d853.N_STAGES, :d853.N_STAGES]),
+    b=d853.B.copy(),
+    c=d853.C[:d853.N_STAGES].copy(),
+    e=d853.E5.copy(),
+    p=_dop853_dense(),
+    order=8,
+    error_order=7,
+    e3=d853.E3.copy(),
+    a_extra=np.ascontiguousarray(d853.A[d853.N_STAGES + 1:]),
+    c_extra=d853.C[d853.N_STAGES + 1:].copy(),
+)
+"""Dormand–Prince 8(5,3) as in scipy's DOP853: twelve stages plus FSAL, an error estimate of order 5
+tempered by one of order 3 (error_order 7 sets the step-size exponent, as in scipy), and a degree-7
+interpolant that needs three more right-hand sides after a step is accepted."""

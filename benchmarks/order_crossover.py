@@ -1,0 +1,86 @@
+"""Where DOP853 starts to pay: both Dormand–Prince pairs forced on the benchmark scenes, work against error.
+
+For each scene and rtol in 1e-4..1e-12 (atol = rtol·1e-2, output every 1 ms) each pair runs `simulate`;
+error = max |angles − reference| over the run, the reference being the same scene at rtol 1e-13
+(DOP853, atol 1e-15); cost = the fastest of REPEATS wall times, the runs of both pairs interleaved. Printed
+per scene: the cost at 1e-6 and 1e-10 rad (log-log interpolation between rtols), steps and RHS evaluations,
+and per rtol the ratio of DOP853's cost to DOPRI5's at the error DOP853 reached (< 1: DOP853 pays).
+solver.DOP853_BELOW is set from these ratios.
+
+    PYTHONPATH=src python benchmarks/order_crossover.py [scene ...]
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import numpy as np
+
+from grapefmu import simulate
+from grapefmu.bench.scenes import bench_scenes, build
+from grapefmu.solver import solver as sv
+
+RTOLS = [10.0 ** -k for k in range(4, 13)]
+REPEATS = 5
+PAIRS = {"DOPRI5": 0.0, "DOP853": math.inf}  # DOP853_BELOW that forces each pair
+SCENES = ("paper collision", "free swing", "shaken stiff pair")
+
+
+def run(scene, pair, rtol, atol):
+    sv.DOP853_BELOW = PAIRS[pair]
+    t = time.perf_counter()
+    r = simulate(scene, rtol=rtol, atol=atol, output_interval=1e-3)
+    return time.perf_counter() - t, r
+
+
+def at_error(errors, costs, target):
+    """Cost at `target` error, interpolated in log-log between the runs that bracket it (nan outside)."""
+    le, lc = np.log10(errors), np.log10(costs)
+    for i in range(len(le) - 1):
+        lo, hi = sorted((le[i], le[i + 1]))
+        if lo <= math.log10(target) <= hi and hi > lo:
+            w = (math.log10(target) - le[i]) / (le[i + 1] - le[i])
+            return 10.0 ** (lc[i] + w * (lc[i + 1] - lc[i]))
+    return math.nan
+
+
+def main(names):
+    scenes = bench_scenes()
+    kept = sv.DOP853_BELOW
+    try:
+        for name in names:
+            sc = build(scenes[name])
+            _, ref = run(sc, "DOP853", 1e-13, 1e-15)
+            rows = {p: [] for p in PAIRS}
+            for rtol in RTOLS:
+                best = {p: math.inf for p in PAIRS}
+                last = {}
+                for _ in range(REPEATS):
+                    for p in PAIRS:
+                        w, r = run(sc, p, rtol, rtol * 1e-2)
+                        best[p], last[p] = min(best[p], w), r
+                for p in PAIRS:
+                    err = float(np.abs(last[p].angles - ref.angles).max())
+                    rows[p].append((rtol, max(err, 1e-16), best[p], last[p].stats["steps"],
+                                    last[p].stats["rhs_evaluations"]))
+            print(f"\n## {name}")
+            print(f"{'rtol':>7} | {'DOPRI5 err':>10} {'ms':>8} {'steps':>7} {'rhs':>8} | "
+                  f"{'DOP853 err':>10} {'ms':>8} {'steps':>7} {'rhs':>8} | ratio")
+            e5, c5 = np.array([r[1] for r in rows["DOPRI5"]]), np.array([r[2] for r in rows["DOPRI5"]])
+            for a, b in zip(rows["DOPRI5"], rows["DOP853"]):
+                ratio = b[2] / at_error(e5, c5, b[1])
+                print(f"{a[0]:7.0e} | {a[1]:10.2e} {a[2] * 1e3:8.2f} {a[3]:7d} {a[4]:8d} | "
+                      f"{b[1]:10.2e} {b[2] * 1e3:8.2f} {b[3]:7d} {b[4]:8d} | {ratio:5.2f}")
+            for target in (1e-6, 1e-10):
+                cells = []
+                for p in PAIRS:
+                    e, c = np.array([r[1] for r in rows[p]]), np.array([r[2] for r in rows[p]])
+                    cells.append(f"{p} {at_error(e, c, target) * 1e3:8.2f} ms")
+                print(f"cost at {target:.0e} rad: " + ", ".join(cells))
+    finally:
+        sv.DOP853_BELOW = kept
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:] or SCENES)
