@@ -52,3 +52,16 @@ def test_plain_counts_are_on_and_change_no_number():
     plain, atomic = _run(False), _run(True)
     assert plain.pop("plain") is True and atomic.pop("plain") is False
     assert plain == atomic
+
+
+def test_the_fmus_import_path_loads_no_scipy_integrate():
+    """Importing scipy.integrate inside a C host's embedded Python made the host's exit crash on a corrupted heap
+    (tests/test_fmu_hardening.py); what the FMU imports to step and report must not load it."""
+    code = ("import sys, grapefmu, grapefmu_fmu.core, grapefmu_fmu.fmi2, grapefmu_fmu.fmi3\n"
+            "from grapefmu import Solver\nfrom grapefmu.scenefile import load_scene\n"
+            f"s = Solver(load_scene({str(ROOT / 'scenes' / 'default.toml')!r}), turning=True)\n"
+            "s.advance(1e-3, (1.0, 0.0, 0.0, 0.0, 0.0, 0.0)); s.snapshot()\n"
+            "print(sorted(m for m in sys.modules if m.startswith('scipy.integrate')))")
+    env = {**os.environ, "PYTHONPATH": f"{ROOT / 'src'}{os.pathsep}{ROOT / 'fmu_build'}"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600, check=True)
+    assert out.stdout.strip().splitlines()[-1] == "[]"

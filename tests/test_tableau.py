@@ -97,3 +97,13 @@ def test_dop853_error_estimate_is_fifth_order():
     order = np.polyfit(np.log(hs), np.log(est), 1)[0]
     print(f"estimate order {order:.2f}: {est}")
     assert 5.5 < order < 7.0
+
+
+def test_dop853_coefficients_are_scipys():
+    """The written-out coefficients (tableau.py) are scipy's dop853_coefficients, bit for bit."""
+    from scipy.integrate._ivp import dop853_coefficients as d
+
+    s = d.N_STAGES
+    assert np.array_equal(DOP853.a, d.A[:s, :s]) and np.array_equal(DOP853.b, d.B)
+    assert np.array_equal(DOP853.c, d.C[:s]) and np.array_equal(DOP853.e, d.E5) and np.array_equal(DOP853.e3, d.E3)
+    assert np.array_equal(DOP853.a_extra, d.A[s + 1:]) and np.array_equal(DOP853.c_extra, d.C[s + 1:])
