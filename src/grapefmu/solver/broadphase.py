@@ -79,12 +79,20 @@ def reach(samples, reference, world):
 
 @inline
 def travel(q, h, r):
-    """A bound on how far component r of y gets on the step's dense output: |y_r(θ) − y_r(0)| = h |Σ_j Q[r, j] θ^(j+1)|
-    ≤ h Σ_j |Q[r, j]| for θ in [0, 1]."""
-    s = 0.0
-    for j in range(q.shape[1]):
-        s += abs(q[r, j])
-    return h * s
+    """A bound on how far component r of y gets on the step's dense output, |y_r(θ) − y_r(0)| for θ in [0, 1]: the
+    largest Bernstein coefficient of h Σ_j Q[r, j] θ^(j+1) (a polynomial on [0, 1] lies within its Bernstein
+    coefficients; β_i = Σ_{m ≤ i} C(i, m) / C(n, m) a_m from the power coefficients a_m, a_0 = 0). Tight where
+    Σ_j |Q[r, j]| is not: DOP853's power-basis coefficients reach several hundred and cancel."""
+    n = q.shape[1]
+    worst = 0.0
+    for i in range(1, n + 1):
+        b = 0.0
+        c = 1.0
+        for m in range(1, i + 1):
+            c *= (i - m + 1) / (n - m + 1)
+            b += c * q[r, m - 1]
+        worst = max(worst, abs(b))
+    return h * worst
 
 
 @jit
@@ -93,7 +101,7 @@ def quiet(y0, q, h, M, contacts, B, cfg, kin, bound):
     near list's reference, and no near pair that is apart (and watched) can touch, on the step's dense output.
     Returns the bound on how far a berry got from the reference (the caller's `far`, as keep_valid's).
 
-    The bound on berry i's travel: its twig end sweeps at most l (|Δs| + |Δt|) (u is 1-Lipschitz in s and in t),
+    The bound on berry i's travel: its twig end moves at most l (|Δs| + |Δt|) (u is 1-Lipschitz in s and in t),
     and in the world frame also |Δb| + ‖ΔR‖ |p| (‖ΔR‖ ≤ 2 |Δq̂| ≤ 4 |Δq| / |q| for the orientation quaternion q);
     each from travel(). A gap moves at most by the travel of what it separates (|∇δ| ≤ 1 in each position).
     kin gets stage 1 at the step's start; bound ((N, 2)) each berry's travel in the rachis and the world frame."""
