@@ -475,3 +475,27 @@ def test_fuzz_command_lines(cli_dir, args):
         lines = r.stderr.strip().splitlines()
         assert len(lines) == 1 and lines[0].startswith("grapefmu"), (args, r.stderr)
     assert not list(cli_dir.rglob("*.grapefmu-part")), args
+
+
+def test_an_interruption_a_library_turned_into_another_error_still_ends_as_one(monkeypatch, tmp_path, capsys):
+    """SIGINT raises Interrupted wherever Python is; inside numba's boxing of a compiled object it came out as a
+    TypeError (a risk run interrupted in CI exited 1 instead of 130). Once a signal was received, whatever the
+    command raises ends it as that interruption: 128 + signal, and the journal's note."""
+    from grapefmu import cli
+
+    def interrupted_inside_a_library(a):
+        cli._received.append(signal.SIGINT)  # what _on_signal records before it raises
+        raise TypeError("StructRefProxy._numba_box_() missing 2 required positional arguments: 'ty' and 'mi'")
+
+    import grapefmu.sweep as sweep_pkg
+    monkeypatch.setattr(sweep_pkg, "run_sweep", lambda *a, **k: interrupted_inside_a_library(None))
+    (tmp_path / "scene.toml").write_text((Path(__file__).resolve().parents[1] / "scenes" / "default.toml").read_text())
+    spec = tmp_path / "s.toml"
+    spec.write_text('scene = "scene.toml"\nmode = "grid"\n[[parameters]]\nkey = "contact.stiffness"\n'
+                    'values = [1000.0, 2000.0]\n')
+    monkeypatch.chdir(tmp_path)
+    code = cli.main(["sweep", str(spec)])
+    err = capsys.readouterr().err
+    assert code == 130, err
+    assert "interrupted" in err and "run the same command again" in err
+    cli._received.clear()

@@ -179,7 +179,9 @@ def cmd_sweep(a: argparse.Namespace) -> int:
         raise GrapefmuError(f"--workers: expected an integer in [1, 1024], got {a.workers}")
     try:
         run_sweep(spec, out, workers=a.workers, scheduler=a.scheduler)
-    except KeyboardInterrupt as e:  # say what is kept and how to go on
+    except BaseException as e:  # interrupted: say what is kept and how to go on
+        if not _interrupted_by(e):
+            raise
         journal = out.with_name(out.name + ".journal.jsonl")
         try:
             kept = max(len(journal.read_text().splitlines()) - 1, 0)
@@ -252,7 +254,9 @@ def cmd_risk(a: argparse.Namespace) -> int:
     try:
         r = assess(a.plans, dist, a.samples, a.seed, out, max_bruise=a.max_bruise, scales=scales, workers=a.workers,
                    scheduler=a.scheduler, say=say, command="grapefmu " + shlex.join(a.argv))
-    except KeyboardInterrupt as e:
+    except BaseException as e:
+        if not _interrupted_by(e):
+            raise
         e.note = (f"the finished runs are kept in {out} (a journal per interrupted sweep, a table per finished "
                   "one); run the same command again to resume")
         raise
@@ -539,11 +543,22 @@ class Interrupted(KeyboardInterrupt):
         self.signum = signum
 
 
+#: the signals _on_signal turned into Interrupted: raised inside a library's Python code (numba boxing a compiled
+#: object, say), the exception may come out as another one
+_received: list[int] = []
+
+
 def _on_signal(signum, frame):
     # a second signal while cleaning up ends the process at once (the next writer removes what it left)
     signal.signal(signal.SIGINT, signal.SIG_DFL)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    _received.append(signum)
     raise Interrupted(signum)
+
+
+def _interrupted_by(e: BaseException) -> bool:
+    """Whether e ends the command because of SIGINT or SIGTERM: the Interrupted raised, or what a library made of it."""
+    return isinstance(e, KeyboardInterrupt) or bool(_received)
 
 
 def _explain(e: BaseException) -> tuple[str, int]:
@@ -614,20 +629,23 @@ def main(argv: list[str] | None = None) -> int:
     handlers = {}
     if threading.current_thread() is threading.main_thread():
         handlers = {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    _received.clear()
     try:
         try:
             _check_overrides(a)
             return a.func(a)
-        except (GrapefmuError, OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError, OverflowError,
-                MemoryError) as e:
+        except BaseException as e:
+            if _interrupted_by(e):
+                signum = getattr(e, "signum", _received[0] if _received else signal.SIGINT)
+                note = getattr(e, "note", None)
+                print(f"{_newline()}{cmd}: {_interrupted(a, before)}{'; ' + note if note else ''}", file=sys.stderr)
+                return 128 + signum
+            if not isinstance(e, (GrapefmuError, OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, RecursionError,
+                                  OverflowError, MemoryError)):
+                raise
             text, code = _explain(e)
             print(f"{_newline()}{cmd}: {' '.join(text.split())}", file=sys.stderr)
             return code
-        except KeyboardInterrupt as e:
-            signum = getattr(e, "signum", signal.SIGINT)
-            note = getattr(e, "note", None)
-            print(f"{_newline()}{cmd}: {_interrupted(a, before)}{'; ' + note if note else ''}", file=sys.stderr)
-            return 128 + signum
     finally:
         for sig, h in handlers.items():
             if h is not None:
