@@ -23,7 +23,7 @@ from typing import NamedTuple
 from ..model.model import Scene
 
 #: the first compile of the core on a cold cache, s (README.md: measured on 2 cores, `NUMBA_CACHE_DIR` empty)
-COMPILE_SECONDS = 30
+COMPILE_SECONDS = 90
 NOTICE = "grapefmu: compiling the core once (about {seconds} s); later runs load it from the cache"
 
 
