@@ -116,20 +116,24 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_parts(path)
+    prefix, tmp = _part_prefix(path), None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=_part_prefix(path), suffix=PART_SUFFIX, dir=path.parent)
-    except OSError as e:
-        raise GrapefmuError(f"{path}: cannot write in directory {path.parent}: {e.strerror or e}") from None
-    os.close(fd)
-    try:
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=PART_SUFFIX, dir=path.parent)
+        except OSError as e:
+            raise GrapefmuError(f"{path}: cannot write in directory {path.parent}: {e.strerror or e}") from None
+        os.close(fd)
         yield Path(tmp)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        # a signal the moment the file exists (inside mkstemp, before its name is known here) leaves it too: the
+        # temporary files of this process for this target go
+        for part in [Path(tmp)] if tmp is not None else path.parent.glob(f"{glob.escape(prefix)}*{PART_SUFFIX}"):
+            with contextlib.suppress(FileNotFoundError):
+                part.unlink()
 
 
 def write_csv(run: Run, path: str | Path) -> None:
