@@ -48,9 +48,10 @@ def rebuild(M, contacts, Bk, B, kin, skin):
 
 @jit
 def sample(y0, q, h, M, work, samples):
-    """Fill samples from the step's dense output (stage 1 at every sample point)."""
+    """Fill samples from the step's dense output (stage 1 at every sample point) but the first, θ = 0: y0 itself,
+    whose stage 1 quiet() put there."""
     m = model_head(M)  # the head of y: angles, rates and the rachis motion
-    for k in range(N_SAMPLES + 1):
+    for k in range(1, N_SAMPLES + 1):
         dense_head(k / N_SAMPLES, y0, q, h, work, m)
         kinematics(work, M, samples[k])
 
@@ -96,7 +97,7 @@ def travel(q, h, r):
 
 
 @jit
-def quiet(y0, q, h, M, contacts, B, cfg, kin, bound):
+def quiet(y0, q, h, M, contacts, B, cfg, kin, bound, watch):
     """A certificate that a step needs neither samples nor an event search, or −1: no berry gets skin/2 from the
     near list's reference, and no near pair that is apart (and watched) can touch, on the step's dense output.
     Returns the bound on how far a berry got from the reference (the caller's `far`, as keep_valid's).
@@ -104,10 +105,15 @@ def quiet(y0, q, h, M, contacts, B, cfg, kin, bound):
     The bound on berry i's travel: its twig end moves at most l (|Δs| + |Δt|) (u is 1-Lipschitz in s and in t),
     and in the world frame also |Δb| + ‖ΔR‖ |p| (‖ΔR‖ ≤ 2 |Δq̂| ≤ 4 |Δq| / |q| for the orientation quaternion q);
     each from travel(). A gap moves at most by the travel of what it separates (|∇δ| ≤ 1 in each position).
-    kin gets stage 1 at the step's start; bound ((N, 2)) each berry's travel in the rachis and the world frame."""
+    kin gets stage 1 at the step's start; bound ((N, 2)) each berry's travel in the rachis and the world frame;
+    watch[kk] whether near pair kk can switch on this step: the event search looks at those alone (all of them
+    when the list itself is not certified)."""
     nb = M.berry.shape[0]
     world = M.obstacle.shape[0] > 0
     o_bv, o_b, o_om, o_rot = model_offsets(M)[:4]
+    kinematics(y0, M, kin)
+    for kk in range(B.count[0]):
+        watch[kk] = True
     base = 0.0
     turn = 0.0
     if world:
@@ -118,7 +124,6 @@ def quiet(y0, q, h, M, contacts, B, cfg, kin, bound):
                 return -1.0
             turn = 4.0 * math.sqrt(travel(q, h, o_rot) ** 2 + travel(q, h, o_rot + 1) ** 2
                                    + travel(q, h, o_rot + 2) ** 2 + travel(q, h, o_rot + 3) ** 2) / n0
-    kinematics(y0, M, kin)
     ref = B.reference
     far = 0.0
     for i in range(nb):
@@ -138,22 +143,27 @@ def quiet(y0, q, h, M, contacts, B, cfg, kin, bound):
         return -1.0
     if not cfg.locate:
         return far
+    calm = True
     for kk in range(B.count[0]):
         p = B.near[kk]
         c = contacts[p]
         if c.smooth:
-            continue  # evaluated inline, never located
+            watch[kk] = False  # evaluated inline, never located
+            continue
         if c.mode != 0:
-            return -1.0
+            calm = False
+            continue
         pr = M.pair[p]
         if pr.j < nb:
             reach = bound[pr.i, 0] + bound[pr.j, 0]
         else:
             reach = bound[pr.i, 1] if fixed_in_world(M, pr) else bound[pr.i, 0]
         delta = contact_gap(M, pr, kin)[0]
-        if not (delta + 1.001 * reach + 1e-12 < 0.0):  # margin for rounding in the gap and the polynomials
-            return -1.0
-    return far
+        if delta + 1.001 * reach + 1e-12 < 0.0:  # margin for rounding in the gap and the polynomials
+            watch[kk] = False
+        else:
+            calm = False
+    return far if calm else -1.0
 
 
 @jit

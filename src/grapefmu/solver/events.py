@@ -16,8 +16,7 @@ from ..physics.compiled import inline, jit
 from ..physics.damage import bruise_thresholds, bruising
 from ..physics.forces import pair_law
 from ..physics.kinematics import contact_gap, pair_state
-from ..physics.layout import model_head
-from .step import dense_head
+from .step import dense_pair
 
 EV_DELTA, EV_PHI = 0, 1
 N_SAMPLES = 4          # sub-intervals per step searched for a sign change (plus local-maximum refinement)
@@ -66,10 +65,10 @@ def classify(p, y, M, contacts, kin, old_mode):
 @jit
 def locate_root(fn, sign, p, ta, tb, y0, q, h, M, contacts, kin, work, tol):
     """Illinois iteration on θ ∈ [ta, tb] with v(ta) ≤ 0 < v(tb); returns the right end."""
-    m = model_head(M)  # the head of y: angles, rates and the rachis motion
-    dense_head(ta, y0, q, h, work, m)
+    pr = M.pair[p]
+    dense_pair(ta, y0, q, h, work, M, pr)
     va = value_at(fn, sign, p, work, M, contacts, kin)
-    dense_head(tb, y0, q, h, work, m)
+    dense_pair(tb, y0, q, h, work, M, pr)
     vb = value_at(fn, sign, p, work, M, contacts, kin)
     side = 0
     for _ in range(200):
@@ -83,7 +82,7 @@ def locate_root(fn, sign, p, ta, tb, y0, q, h, M, contacts, kin, work, tol):
             tm = 0.5 * (ta + tb)
         if (tb - ta) * h < 64 * tol:  # keep the bracket shrinking from both sides
             tm = 0.5 * (ta + tb)
-        dense_head(tm, y0, q, h, work, m)
+        dense_pair(tm, y0, q, h, work, M, pr)
         vm = value_at(fn, sign, p, work, M, contacts, kin)
         if vm > 0.0:
             tb, vb = tm, vm
@@ -111,11 +110,11 @@ def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work):
     ones where a parabola does not help): returns (θ, value) once a value is positive, the bracket is ROOT_TOL wide,
     or the largest is far below zero. A graze is a smooth maximum, so the parabolic steps converge in a few
     evaluations where golden sections alone took thirty to forty."""
-    m = model_head(M)  # the head of y: angles, rates and the rachis motion
+    pr = M.pair[p]
     cg = 0.3819660112501051  # golden section, 1 − 1/φ
     tol = ROOT_TOL / h
     x = w = v = a + cg * (b - a)
-    dense_head(x, y0, q, h, work, m)
+    dense_pair(x, y0, q, h, work, M, pr)
     fx = value_at(fn, sign, p, work, M, contacts, kin)
     fw = fv = fx
     d = e = 0.0
@@ -144,7 +143,7 @@ def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work):
             e = (a - x) if x >= xm else (b - x)
             d = cg * e
         u = x + (d if abs(d) >= tol1 else (tol1 if d > 0.0 else -tol1))
-        dense_head(u, y0, q, h, work, m)
+        dense_pair(u, y0, q, h, work, M, pr)
         fu = value_at(fn, sign, p, work, M, contacts, kin)
         if fu >= fx:
             if u >= x:
@@ -165,16 +164,19 @@ def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work):
 
 
 @jit
-def find_event(y0, q, h, t0, M, contacts, near, n_near, kin, samples, values, work):
-    """Earliest θ in (0, 1] where a watched function of a near pair turns positive, or (1, False).
+def find_event(y0, q, h, t0, M, contacts, near, n_near, watch, kin, samples, values, work):
+    """Earliest θ in (0, 1] where a watched function of a near pair turns positive, or (1, False); of the near
+    pairs, those the broad phase could not rule out (watch).
 
     samples ((N_SAMPLES + 1, N) KINEMATICS) holds the berries at the step's sample points (the broad phase
     computed them); a sign change between samples gives a bracket at once, a sampled local maximum that
-    is ≤ 0 but close to zero is refined by a golden-section search."""
+    is ≤ 0 but close to zero is refined by Brent's method."""
     tol = max(ROOT_TOL, 8 * 2.2e-16 * abs(t0))
     for k in range(N_SAMPLES + 1):
         at = samples[k]
         for kk in range(n_near):
+            if not watch[kk]:
+                continue
             p = near[kk]
             pr, c = M.pair[p], contacts[p]
             delta, delta_dot, _, _, _ = contact_gap(M, pr, at)
@@ -185,7 +187,7 @@ def find_event(y0, q, h, t0, M, contacts, near, n_near, kin, samples, values, wo
     for kk in range(n_near):
         p = near[kk]
         pr, c = M.pair[p], contacts[p]
-        if c.smooth:
+        if c.smooth or not watch[kk]:
             continue
         na, f1, s1, f2, s2 = watched(c.mode, pr.law, pr.clamp)
         for a in range(na):

@@ -9,10 +9,10 @@ from ..physics.compiled import jit
 from ..physics.damage import detaching
 from ..physics.excitation import applied_accel
 from ..physics.forces import active, forces, pair_force, pedicel_tension
-from ..physics.kinematics import kinematics, pair_state
+from ..physics.kinematics import Workspace, kinematics, pair_state, rachis_frame
 from ..physics.layout import model_head
 from .events import N_SAMPLES, check_bruising, classify
-from .step import dense_head
+from .step import dense_head, dense_pair, dense_rachis
 
 #: Boole's rule on the N_SAMPLES + 1 equally spaced samples: exact for quintics; its error per step,
 #: O(h^7), stays below DOPRI5's local error O(h^6)
@@ -30,8 +30,8 @@ GOLDEN = 0.6180339887498949
 @jit
 def force_at(theta, p, y0, q, h, M, contacts, kin, work):
     """Pair p's force at θ on the step's dense output."""
-    dense_head(theta, y0, q, h, work, model_head(M))
     pr = M.pair[p]
+    dense_pair(theta, y0, q, h, work, M, pr)
     delta, delta_dot, _, _, _ = pair_state(work, M, pr, kin)
     return pair_force(pr, contacts[p], delta, delta_dot)[0]
 
@@ -70,23 +70,36 @@ def integrate_gauss(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, b
 
 @jit
 def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, totals, book_pair, peak_tension, cfg, W,
-                work, fbuf, pwbuf, cls):
+                work, fbuf, pwbuf, cls, samples, sampled):
+    """Book the step up to θ = theta_end. `sampled`: samples holds the berries at θ = k / N_SAMPLES (the broad
+    phase's), the points this pass reads when the step is committed whole, so stage 1 is not computed twice."""
     tot = totals[0]
-    berry, kin = M.berry, W.berry
+    berry = M.berry
     span = theta_end * h
+    reuse = sampled and theta_end == 1.0
     gauss = q.shape[1] > 5 and integrate_gauss(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, book_pair,
                                                 W, work, fbuf, pwbuf)
     for k in range(N_SAMPLES + 1):
         th = theta_end * k / N_SAMPLES
-        dense_head(th, y0, q, h, work, model_head(M))
         acc = applied_accel(X, inp, t0 + th * h, t0)
-        fr = kinematics(work, M, kin)
-        forces(acc, fr, contacts, M, W, near, nnear)
+        if reuse:
+            kin = samples[k]
+            dense_rachis(th, y0, q, h, work, M)
+            fr = rachis_frame(work, M)
+            Wk = Workspace(kin, W.torque, W.pair, W.coupling_power)
+        else:
+            kin = W.berry
+            dense_head(th, y0, q, h, work, model_head(M))
+            fr = kinematics(work, M, kin)
+            Wk = W
+        forces(acc, fr, contacts, M, Wk, near, nnear)
         for kk in range(nnear):
             p = near[kk]
             fbuf[k, kk] = W.pair[kk].force
             pwbuf[k, kk] = W.pair[kk].power
             if contacts[p].smooth:
+                if reuse:
+                    dense_pair(th, y0, q, h, work, M, M.pair[p])
                 cls[k, kk] = classify(p, work, M, contacts, kin, contacts[p].mode)[0]
         for i in range(berry.shape[0]):
             tension = pedicel_tension(berry[i], kin[i])
@@ -96,6 +109,7 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
                 peak_tension[i] = tension
                 if tension > tot.peak_pedicel_tension:
                     tot.peak_pedicel_tension = tension
+    kin = W.berry
     for kk in range(nnear):
         p = near[kk]
         c = contacts[p]

@@ -7,6 +7,7 @@ import numpy as np
 
 from ..physics.dynamics import rhs, rhs_inline
 from ..physics.compiled import inline, jit
+from ..physics.layout import model_offsets
 
 
 @inline
@@ -19,6 +20,28 @@ def dense(theta, y0, q, h, out):
 def dense_head(theta, y0, q, h, out, m):
     """dense() for the first m components only (the angles and rates that events and forces need)."""
     for r in range(m):
+        out[r] = dense_component(theta, y0, q, h, r)
+
+
+@inline
+def dense_pair(theta, y0, q, h, out, M, pr):
+    """dense_head() for what one pair's stage 1 reads (physics/kinematics.pair_state): its berries' four entries of
+    y (berry_kinematics' s, ṡ, t, ṫ) and the rachis motion. The same numbers as dense_head(), for O(1) components
+    where dense_head() computes the whole head: a cluster's event and peak searches evaluate one pair at a time."""
+    nd = M.n_dof
+    for i in (pr.i, pr.j):
+        if i < M.berry.shape[0]:
+            o = M.berry[i].dof
+            for r in (o, o + 1, nd + o, nd + o + 1):  # o + 1 < nd + o: inside the head
+                out[r] = dense_component(theta, y0, q, h, r)
+    dense_rachis(theta, y0, q, h, out, M)
+
+
+@inline
+def dense_rachis(theta, y0, q, h, out, M):
+    """dense_head() for the rachis motion alone (what physics/kinematics.rachis_frame reads)."""
+    off = model_offsets(M)
+    for r in range(off[0], off[4]):
         out[r] = dense_component(theta, y0, q, h, r)
 
 
