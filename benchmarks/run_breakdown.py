@@ -1,0 +1,51 @@
+"""Where one `simulate` of a benchmark scene goes (docs/bench_notes.md, "Why the speed targets are missed"): the
+Python around the compiled loop (Solver() and the result), the output grid, and the loop's cost per step beyond
+its right-hand-side evaluations (RHS evaluations × one bare RHS, bench/costs.py). Each figure is the minimum of
+`REPEATS` interleaved runs.
+Run: .venv/bin/python benchmarks/run_breakdown.py ["paper collision"] [rtol]"""
+from __future__ import annotations
+
+import sys
+import time
+
+import grapefmu
+from grapefmu.bench.costs import rhs_seconds
+from grapefmu.bench.scenes import bench_scenes, build
+from grapefmu.solver.solver import Solver
+
+REPEATS = 30
+
+
+def main(name: str = "paper collision", rtol: float = 1e-6) -> None:
+    sc = build(bench_scenes()[name])
+    kw = dict(rtol=rtol, atol=rtol / 100)
+    t_end = sc.solver.t_end
+    run = grapefmu.simulate(sc, output_interval=1e-3, **kw)
+    rhs = min(rhs_seconds(run) for _ in range(5))
+    best = dict.fromkeys(("simulate", "Solver()", "loop, 1 ms grid", "loop, no grid"), float("inf"))
+    for _ in range(REPEATS):
+        t0 = time.perf_counter()
+        run = grapefmu.simulate(sc, output_interval=1e-3, **kw)
+        best["simulate"] = min(best["simulate"], time.perf_counter() - t0)
+        best["loop, 1 ms grid"] = min(best["loop, 1 ms grid"], run.stats["wall_time"])
+        t0 = time.perf_counter()
+        solver = Solver(sc, **kw)
+        best["Solver()"] = min(best["Solver()"], time.perf_counter() - t0)
+        bare = solver.run(output_interval=t_end)  # one sample at the end: the same steps, no grid
+        best["loop, no grid"] = min(best["loop, no grid"], bare.stats["wall_time"])
+    s = run.stats
+    floor = s["rhs_evaluations"] * rhs
+    python = best["simulate"] - best["loop, 1 ms grid"]
+    grid = best["loop, 1 ms grid"] - best["loop, no grid"]
+    beyond = (best["loop, no grid"] - floor) / s["steps"]
+    print(f"{name}, rtol {rtol:g}, {t_end:g} s simulated: {s['steps']} steps ({s['quiet_steps']} quiet, "
+          f"{s['rejected']} rejected), {s['rhs_evaluations']} RHS evaluations at {rhs * 1e9:.0f} ns")
+    print(f"  simulate             {best['simulate'] * 1e3:8.3f} ms  ({best['simulate'] / t_end * 1e3:.3f} ms per simulated s)")
+    print(f"  Python around loop   {python * 1e3:8.3f} ms  (of it Solver() {best['Solver()'] * 1e3:.3f} ms)")
+    print(f"  output grid          {grid * 1e3:8.3f} ms  ({grid / max(len(run.t) - 1, 1) * 1e9:.0f} ns a sample)")
+    print(f"  loop without grid    {best['loop, no grid'] * 1e3:8.3f} ms  = RHS floor {floor * 1e3:.3f} ms "
+          f"+ {beyond * 1e6:.2f} µs a step beyond its RHS evaluations")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1] if len(sys.argv) > 1 else "paper collision", float(sys.argv[2]) if len(sys.argv) > 2 else 1e-6)
