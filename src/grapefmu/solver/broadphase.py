@@ -97,23 +97,23 @@ def travel(q, h, r):
 
 
 @jit
-def quiet(y0, q, h, M, contacts, B, cfg, kin, bound, watch):
+def quiet(y0, q, h, M, contacts, B, cfg, kin, bound, suspect):
     """A certificate that a step needs neither samples nor an event search, or −1: no berry gets skin/2 from the
-    near list's reference, and no near pair that is apart (and watched) can touch, on the step's dense output.
+    near list's reference, and no near pair that is apart (and event-located) can touch, on the step's dense output.
     Returns the bound on how far a berry got from the reference (the caller's `far`, as keep_valid's).
 
     The bound on berry i's travel: its twig end moves at most l (|Δs| + |Δt|) (u is 1-Lipschitz in s and in t),
     and in the world frame also |Δb| + ‖ΔR‖ |p| (‖ΔR‖ ≤ 2 |Δq̂| ≤ 4 |Δq| / |q| for the orientation quaternion q);
     each from travel(). A gap moves at most by the travel of what it separates (|∇δ| ≤ 1 in each position).
     kin gets stage 1 at the step's start; bound ((N, 2)) each berry's travel in the rachis and the world frame;
-    watch[kk] whether near pair kk can switch on this step: the event search looks at those alone (all of them
-    when the list itself is not certified)."""
+    suspect[kk] whether near pair kk can switch on this step (the bound cannot rule it out): the event search looks
+    at the suspects alone (every near pair when the list itself is not certified)."""
     nb = M.berry.shape[0]
     world = M.obstacle.shape[0] > 0
     o_bv, o_b, o_om, o_rot = model_offsets(M)[:4]
     kinematics(y0, M, kin)
     for kk in range(B.count[0]):
-        watch[kk] = True
+        suspect[kk] = True
     base = 0.0
     turn = 0.0
     if world:
@@ -148,7 +148,7 @@ def quiet(y0, q, h, M, contacts, B, cfg, kin, bound, watch):
         p = B.near[kk]
         c = contacts[p]
         if c.smooth:
-            watch[kk] = False  # evaluated inline, never located
+            suspect[kk] = False  # evaluated inline, never located
             continue
         if c.mode != 0:
             calm = False
@@ -160,7 +160,7 @@ def quiet(y0, q, h, M, contacts, B, cfg, kin, bound, watch):
             reach = bound[pr.i, 1] if fixed_in_world(M, pr) else bound[pr.i, 0]
         delta = contact_gap(M, pr, kin)[0]
         if delta + 1.001 * reach + 1e-12 < 0.0:  # margin for rounding in the gap and the polynomials
-            watch[kk] = False
+            suspect[kk] = False
         else:
             calm = False
     return far if calm else -1.0

@@ -164,9 +164,9 @@ def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work):
 
 
 @jit
-def find_event(y0, q, h, t0, M, contacts, near, n_near, watch, kin, samples, values, work):
+def find_event(y0, q, h, t0, M, contacts, near, n_near, suspect, kin, samples, values, work):
     """Earliest θ in (0, 1] where a watched function of a near pair turns positive, or (1, False); of the near
-    pairs, those the broad phase could not rule out (watch).
+    pairs, those the broad phase could not rule out (suspect).
 
     samples ((N_SAMPLES + 1, N) KINEMATICS) holds the berries at the step's sample points (the broad phase
     computed them); a sign change between samples gives a bracket at once, a sampled local maximum that
@@ -175,7 +175,7 @@ def find_event(y0, q, h, t0, M, contacts, near, n_near, watch, kin, samples, val
     for k in range(N_SAMPLES + 1):
         at = samples[k]
         for kk in range(n_near):
-            if not watch[kk]:
+            if not suspect[kk]:
                 continue
             p = near[kk]
             pr, c = M.pair[p], contacts[p]
@@ -187,7 +187,7 @@ def find_event(y0, q, h, t0, M, contacts, near, n_near, watch, kin, samples, val
     for kk in range(n_near):
         p = near[kk]
         pr, c = M.pair[p], contacts[p]
-        if c.smooth or not watch[kk]:
+        if c.smooth or not suspect[kk]:
             continue
         na, f1, s1, f2, s2 = watched(c.mode, pr.law, pr.clamp)
         for a in range(na):

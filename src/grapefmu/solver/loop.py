@@ -42,7 +42,7 @@ class Buffers(NamedTuple):
     W: Workspace
     samples: np.ndarray  # (N_SAMPLES + 1, N) KINEMATICS: the berries at the step's samples
     travel: np.ndarray   # (N, 2) how far each berry can get in the step, rachis and world frame (broadphase.quiet)
-    watch: np.ndarray    # (P,) whether the k-th near pair can switch in the step (broadphase.quiet)
+    suspect: np.ndarray  # (P,) whether the k-th near pair can switch in the step (broadphase.quiet)
 
 
 @jit
@@ -178,7 +178,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         cnt.rhs_evaluations += TB.c_extra.shape[0]
         q = I.dense
         # --- broad phase, then the earliest contact switch inside the step: none to look for on a quiet step
-        far = quiet(P.y, q, h, M, C, B, cfg, samples[0], Z.travel, Z.watch) if npair > 0 else 0.0
+        far = quiet(P.y, q, h, M, C, B, cfg, samples[0], Z.travel, Z.suspect) if npair > 0 else 0.0
         sampled = far < 0.0
         if sampled:
             far = keep_valid(P.y, q, h, M, C, Bk, B, cfg, work, samples)
@@ -187,15 +187,15 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
                 cnt.rejected += 1
                 continue
             if far == np.inf:  # the list was rebuilt: quiet() screened another one
-                Z.watch[:] = True
+                Z.suspect[:] = True
         else:
             cnt.quiet_steps += 1
         cnt.near_pairs_sum += B.count[0]
         theta_e = 1.0
         event = False
         if sampled and cfg.locate and B.count[0] > 0:
-            theta_e, event = find_event(P.y, q, h, t0, M, C, B.near, B.count[0], Z.watch, W.berry, samples, values,
-                                       work)
+            theta_e, event = find_event(P.y, q, h, t0, M, C, B.near, B.count[0], Z.suspect, W.berry, samples,
+                                        values, work)
         t_commit = t_new if not event or theta_e >= 1.0 else t0 + theta_e * h
         if R.cursor[0].grid_dt > 0.0 and not record_grid(t0, t_commit, h, P.y, q, X, inp, C, Bk.totals, R):
             return OUT_FULL
@@ -213,7 +213,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         cnt.steps += 1
         steps += 1
         changed = B.count[0] > 0 and switch_modes(t_commit, event, P.y, M, C, Bk, B, cfg, R.impacts, R.cursor,
-                                                  W.berry, cls, Z.watch)
+                                                  W.berry, cls, Z.suspect)
         if far > 0.25 * cfg.skin:
             # rebuild early, from where the step ended, so the list stays valid for the next steps
             kinematics(P.y, M, W.berry)
@@ -231,10 +231,10 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
 
 
 @jit
-def switch_modes(t_commit, event, y, M, contacts, Bk, B, cfg, impacts, cursor, kin, cls, watch):
+def switch_modes(t_commit, event, y, M, contacts, Bk, B, cfg, impacts, cursor, kin, cls, suspect):
     """After a commit: each near pair takes the mode its state is in (at a located event, for every
     pair without location, at the end of a Zeno window, or at every step for a smooth law under step
-    control). Returns whether any mode changed. A pair the broad phase ruled out for the step (watch) stayed
+    control). Returns whether any mode changed. A pair the broad phase ruled out for the step (suspect) stayed
     apart: at an event it is not classified again."""
     changed = False
     for kk in range(B.count[0]):
@@ -257,7 +257,7 @@ def switch_modes(t_commit, event, y, M, contacts, Bk, B, cfg, impacts, cursor, k
                     switch_pair(p, new, t_commit, dd, M, contacts, Bk, cfg, impacts, cursor)
                     changed = True
             continue
-        if (event and watch[kk]) or not cfg.locate:
+        if (event and suspect[kk]) or not cfg.locate:
             new, dd = classify(p, y, M, contacts, kin, c.mode)
             if new != c.mode:
                 switch_pair(p, new, t_commit, dd, M, contacts, Bk, cfg, impacts, cursor)
