@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from grapefmu.physics.kinematics import KINEMATICS
-from grapefmu.solver.sampling import GOLDEN, force_at
+from grapefmu.solver.sampling import GOLDEN, pair_at
 from grapefmu.solver.solver import Solver
 
 from .conftest import dual, scene
@@ -27,7 +27,7 @@ def dense_maximum(s: Solver) -> tuple[float, float]:
     kin, work = np.zeros(s.M.berry.shape[0], dtype=KINEMATICS), np.empty(y0.shape[0])
 
     def f(th):
-        return force_at(th, 0, y0, q, h, s.M, contacts, kin, work)
+        return pair_at(th, 0, y0, q, h, s.M, contacts, kin, work)[0]
 
     th = np.linspace(0.0, (s.t - t0) / h, 401)
     v = np.array([f(x) for x in th])

@@ -28,32 +28,19 @@ GOLDEN = 0.6180339887498949
 
 
 @jit
-def force_at(theta, p, y0, q, h, M, contacts, kin, work):
-    """Pair p's force at θ on the step's dense output."""
+def pair_at(theta, p, y0, q, h, M, contacts, kin, work):
+    """Pair p's force and dissipation power at θ on the step's dense output, from its own stage 1 alone (the
+    numbers stage 2 gives it)."""
     pr = M.pair[p]
     dense_pair(theta, y0, q, h, work, M, pr)
     delta, delta_dot, _, _, _ = pair_state(work, M, pr, kin)
-    return pair_force(pr, contacts[p], delta, delta_dot)[0]
+    return pair_force(pr, contacts[p], delta, delta_dot)
 
 
 @jit
-def integrate_gauss(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, book_pair, W, work, fbuf, pwbuf):
-    """Book the active near pairs' impulse and dissipation over the step on the Gauss nodes (fbuf and pwbuf
-    as scratch, before the samples fill them). Returns whether it did: False when no near pair is active."""
-    any_active = False
-    for kk in range(nnear):
-        if active(contacts[near[kk]]):
-            any_active = True
-    if not any_active:
-        return False
+def integrate_gauss(h, theta_end, y0, q, M, contacts, near, nnear, book_pair, kin, work):
+    """Book the active near pairs' impulse and dissipation over the step on the Gauss nodes."""
     span = theta_end * h
-    for k in range(N_SAMPLES + 1):
-        th = theta_end * GAUSS_X[k]
-        dense_head(th, y0, q, h, work, model_head(M))
-        forces(applied_accel(X, inp, t0 + th * h, t0), kinematics(work, M, W.berry), contacts, M, W, near, nnear)
-        for kk in range(nnear):
-            fbuf[k, kk] = W.pair[kk].force
-            pwbuf[k, kk] = W.pair[kk].power
     for kk in range(nnear):
         p = near[kk]
         if not active(contacts[p]):
@@ -61,55 +48,72 @@ def integrate_gauss(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, b
         fi = 0.0
         pi = 0.0
         for k in range(N_SAMPLES + 1):
-            fi += GAUSS_W[k] * fbuf[k, kk]
-            pi += GAUSS_W[k] * pwbuf[k, kk]
+            f, pw = pair_at(theta_end * GAUSS_X[k], p, y0, q, h, M, contacts, kin, work)
+            fi += GAUSS_W[k] * f
+            pi += GAUSS_W[k] * pw
         book_pair[p].impulse += span * fi
         book_pair[p].dissipated += span * pi
-    return True
 
 
 @jit
 def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, totals, book_pair, peak_tension, cfg, W,
                 work, fbuf, pwbuf, cls, samples, sampled):
-    """Book the step up to θ = theta_end. `sampled`: samples holds the berries at θ = k / N_SAMPLES (the broad
-    phase's), the points this pass reads when the step is committed whole, so stage 1 is not computed twice."""
+    """Book the step up to θ = theta_end.
+
+    Every berry's pedicel tension is sampled at θ = k / N_SAMPLES inside the committed part (its end is the next
+    step's first sample): on the berries the broad phase sampled there (`sampled`), else (a quiet step) on its own.
+    The active pairs' forces, for the quadrature and the peak, are sampled on N_SAMPLES + 1 points of the committed
+    part: on a whole step the same points, on a step an event cut short each pair on its own (pair_at), so a
+    cluster's event step evaluates the pairs in contact and not every berry again."""
     tot = totals[0]
-    berry = M.berry
+    berry, kin = M.berry, W.berry
     span = theta_end * h
-    reuse = sampled and theta_end == 1.0
-    gauss = q.shape[1] > 5 and integrate_gauss(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, book_pair,
-                                                W, work, fbuf, pwbuf)
+    whole = theta_end == 1.0
     for k in range(N_SAMPLES + 1):
-        th = theta_end * k / N_SAMPLES
+        th = k / N_SAMPLES
+        if not whole and k > 0 and th >= theta_end:
+            break
         acc = applied_accel(X, inp, t0 + th * h, t0)
-        if reuse:
-            kin = samples[k]
+        if sampled:
+            at = samples[k]
             dense_rachis(th, y0, q, h, work, M)
             fr = rachis_frame(work, M)
-            Wk = Workspace(kin, W.torque, W.pair, W.coupling_power)
+            Wk = Workspace(at, W.torque, W.pair, W.coupling_power)
         else:
-            kin = W.berry
+            at = kin
             dense_head(th, y0, q, h, work, model_head(M))
-            fr = kinematics(work, M, kin)
+            fr = kinematics(work, M, at)
             Wk = W
         forces(acc, fr, contacts, M, Wk, near, nnear)
-        for kk in range(nnear):
-            p = near[kk]
-            fbuf[k, kk] = W.pair[kk].force
-            pwbuf[k, kk] = W.pair[kk].power
-            if contacts[p].smooth:
-                if reuse:
-                    dense_pair(th, y0, q, h, work, M, M.pair[p])
-                cls[k, kk] = classify(p, work, M, contacts, kin, contacts[p].mode)[0]
+        if whole:
+            for kk in range(nnear):
+                p = near[kk]
+                fbuf[k, kk] = W.pair[kk].force
+                pwbuf[k, kk] = W.pair[kk].power
+                if contacts[p].smooth:
+                    if sampled:
+                        dense_pair(th, y0, q, h, work, M, M.pair[p])
+                    cls[k, kk] = classify(p, work, M, contacts, at, contacts[p].mode)[0]
         for i in range(berry.shape[0]):
-            tension = pedicel_tension(berry[i], kin[i])
+            tension = pedicel_tension(berry[i], at[i])
             if tension > peak_tension[i]:
                 if detaching(tension, cfg.detachment_force) and not detaching(peak_tension[i], cfg.detachment_force):
                     tot.berries_over_detachment_force += 1
                 peak_tension[i] = tension
                 if tension > tot.peak_pedicel_tension:
                     tot.peak_pedicel_tension = tension
-    kin = W.berry
+    if not whole:
+        for kk in range(nnear):
+            p = near[kk]
+            if not active(contacts[p]):
+                continue  # its force is zero: neither booked nor searched
+            for k in range(N_SAMPLES + 1):
+                fbuf[k, kk], pwbuf[k, kk] = pair_at(theta_end * k / N_SAMPLES, p, y0, q, h, M, contacts, kin, work)
+                if contacts[p].smooth:
+                    cls[k, kk] = classify(p, work, M, contacts, kin, contacts[p].mode)[0]
+    gauss = q.shape[1] > 5  # a dense output of higher degree than Boole's rule is exact for
+    if gauss:
+        integrate_gauss(h, theta_end, y0, q, M, contacts, near, nnear, book_pair, kin, work)
     for kk in range(nnear):
         p = near[kk]
         c = contacts[p]
@@ -154,7 +158,7 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
                 else:
                     th_in = theta_end * eps
                     d2 = fbuf[0, kk] - 2.0 * fbuf[1, kk] + fbuf[2, kk]
-                rise = force_at(th_in, p, y0, q, h, M, contacts, kin, work) - fbest
+                rise = pair_at(th_in, p, y0, q, h, M, contacts, kin, work)[0] - fbest
                 turning = rise > min(d2, 0.0) * (eps * N_SAMPLES) ** 2
             if turning:
                 # golden-section search between the neighbouring samples (one-sided at the step's ends,
@@ -163,21 +167,21 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
                 b = theta_end * min(kbest + 1, N_SAMPLES) / N_SAMPLES
                 c1 = b - GOLDEN * (b - a)
                 c2 = a + GOLDEN * (b - a)
-                f1 = force_at(c1, p, y0, q, h, M, contacts, kin, work)
-                f2 = force_at(c2, p, y0, q, h, M, contacts, kin, work)
+                f1 = pair_at(c1, p, y0, q, h, M, contacts, kin, work)[0]
+                f2 = pair_at(c2, p, y0, q, h, M, contacts, kin, work)[0]
                 for _ in range(40):  # one new point a round: the kept one is the next round's other point
                     if f1 > f2:
                         b, c2, f2 = c2, c1, f1
                         c1 = b - GOLDEN * (b - a)
-                        f1 = force_at(c1, p, y0, q, h, M, contacts, kin, work)
+                        f1 = pair_at(c1, p, y0, q, h, M, contacts, kin, work)[0]
                     else:
                         a, c1, f1 = c1, c2, f2
                         c2 = a + GOLDEN * (b - a)
-                        f2 = force_at(c2, p, y0, q, h, M, contacts, kin, work)
+                        f2 = pair_at(c2, p, y0, q, h, M, contacts, kin, work)[0]
                     if (b - a) * h < 1e-12:
                         break
                 tm = 0.5 * (a + b)
-                fm = force_at(tm, p, y0, q, h, M, contacts, kin, work)
+                fm = pair_at(tm, p, y0, q, h, M, contacts, kin, work)[0]
                 if fm > fbest:
                     fbest, tbest = fm, tm
         if fbest > bp.peak_force:
