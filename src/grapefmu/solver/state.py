@@ -24,8 +24,10 @@ __all__ = ["BOOK_COUNTERS", "BOOK_PAIR", "CONFIG", "CONTACT", "IMPACT", "INPUT",
 CONFIG = np.dtype([("rtol", "f8"), ("atol", "f8"), ("fixed_step", "f8"), ("zeno_window", "f8"), ("locate", "?"),
                    ("h_max", "f8"), ("skin", "f8"), ("step_control", "?"), ("bruise_force", "f8"),
                    ("bruise_energy", "f8"), ("detachment_force", "f8")])
-#: integrator scalars
-CLOCK = np.dtype([("h", "f8"), ("t_prev", "f8"), ("h_last", "f8"), ("break_index", "i8")])
+#: integrator scalars; h_contact: the step size error control proposed after the first step of the last contact
+#: to open (0 before one has), where the next onset starts (after_onset: the next accepted step sets it)
+CLOCK = np.dtype([("h", "f8"), ("t_prev", "f8"), ("h_last", "f8"), ("break_index", "i8"), ("h_contact", "f8"),
+                  ("after_onset", "?")])
 #: how much work the solver did
 BOOK_COUNTERS = np.dtype([("steps", "i8"), ("rejected", "i8"), ("rhs_evaluations", "i8"), ("switches", "i8"),
                           ("zeno_activations", "i8"), ("near_pairs_sum", "i8"), ("near_list_rebuilds", "i8"),
@@ -252,9 +254,9 @@ def check(state, template: SolverState, n_breaks: int) -> None:
     if ((ring_pos < 0) | (ring_pos >= state.book.ring.shape[1])).any():
         raise StateError(f"state book.pair.ring_pos: outside [0, {state.book.ring.shape[1]})")
     clock = state.integrator.clock[0]
-    if clock["h"] < 0 or not 0 <= clock["break_index"] <= n_breaks:
-        raise StateError(f"state integrator.clock: the step size must be ≥ 0 and the breakpoint index within "
-                         f"[0, {n_breaks}]")
+    if not (clock["h"] >= 0 and clock["h_contact"] >= 0) or not 0 <= clock["break_index"] <= n_breaks:
+        raise StateError(f"state integrator.clock: the step sizes h and h_contact must be ≥ 0 and the breakpoint "
+                         f"index within [0, {n_breaks}]")
     for f in state.book.counters.dtype.names:
         if state.book.counters[f][0] < 0:
             raise StateError(f"state book.counters.{f}: must be ≥ 0")
