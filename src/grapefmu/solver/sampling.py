@@ -21,7 +21,9 @@ BOOLE = np.array([7.0, 32.0, 12.0, 32.0, 7.0]) / 90.0
 #: higher degree than Boole's rule is exact for. DOP853's steps are 5..10 times longer than DOPRI5's: with
 #: Boole's rule its booked dissipation missed the energy ledger by 1.6e-6..5.9e-9 (relative; the ledger's
 #: dissipative case at rtol 1e-8..1e-11) where DOPRI5's misses by 1.5e-8..2.7e-10; on these nodes,
-#: 6.3e-9..1.7e-11. It costs N_SAMPLES + 1 more force evaluations on a step with a pair in contact.
+#: 6.3e-9..1.7e-11. It costs N_SAMPLES + 1 more force evaluations on a step with a pair in contact, which is why
+#: DOPRI5 keeps Boole's rule on the samples the pass already has: Gauss nodes for both pairs were measured 3 % (paper
+#: collision) to 7 % (shaken stiff pair, 230 impacts) slower at rtol 1e-6, for no accuracy a DOPRI5 step can use.
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(N_SAMPLES + 1)  # on [-1, 1]
 GAUSS_X, GAUSS_W = 0.5 * (_NODES + 1.0), 0.5 * _WEIGHTS
 GOLDEN = 0.6180339887498949
