@@ -164,6 +164,33 @@ def test_a_negative_pedicel_tension_is_explained_where_it_is_shown():
     assert "compressed" in inspect.getsource(plot)
 
 
+def test_contact_log_fills_each_pair_from_its_latest_change():
+    """ContactLog.dense and .mode against the plain definition: from each change's sample on, its pair has its
+    record, later changes (the same sample included) overriding earlier ones."""
+    from grapefmu.physics.forces import CONTACT
+    from grapefmu.results.contacts import CHANGE, ContactLog
+
+    rng = np.random.default_rng(3)
+    n, pairs = 400, 7
+    changes = np.zeros(900, CHANGE)
+    changes["sample"] = np.sort(rng.integers(0, n, len(changes)))
+    changes["pair"] = rng.integers(0, pairs, len(changes))
+    changes["mode"] = rng.integers(0, 3, len(changes))
+    changes["v_onset"] = rng.random(len(changes))
+    changes["smooth"] = rng.random(len(changes)) < 0.3
+    start = np.zeros(pairs, CONTACT)
+    start["mode"], start["v_onset"] = 1, 0.5
+    expected = np.empty((n, pairs), CONTACT)
+    expected[:] = start
+    for row in changes:
+        for f in CONTACT.names:
+            expected[f][row["sample"]:, row["pair"]] = row[f]
+    log = ContactLog(start, changes)
+    assert np.array_equal(log.dense(n), expected)
+    assert np.array_equal(log.mode(n), expected["mode"].astype(np.int8))
+    assert np.array_equal(ContactLog.of(expected).dense(n), expected)
+
+
 def test_contact_log_agrees_with_the_impact_book():
     """A run keeps each pair's contact record as changes (results/contacts.py); 230 impacts overflow the recorder's
     change log several times (its chunks are joined). A pair is in contact at exactly the samples inside one of its

@@ -38,16 +38,24 @@ class ContactLog:
     def dense(self, n_samples: int) -> np.ndarray:
         """(n_samples, P) CONTACT: each pair's record at each sample."""
         out = np.empty((n_samples, len(self.start)), CONTACT)
+        pairs, latest = self._latest(n_samples)
         for f in CONTACT.names:
             out[f] = self.start[f]
-            for row in self.changes:
-                out[f][row["sample"]:, row["pair"]] = row[f]
+            out[f][:, pairs] = np.where(latest < 0, self.start[f][pairs], self.changes[f][latest])
         return out
 
     def mode(self, n_samples: int) -> np.ndarray:
         """(n_samples, P) int8: each pair's mode at each sample (0 apart, 1 loaded, 2 overlapping but unloaded)."""
         out = np.empty((n_samples, len(self.start)), np.int8)
         out[:] = self.start["mode"]
-        for row in self.changes:
-            out[row["sample"]:, row["pair"]] = row["mode"]
+        pairs, latest = self._latest(n_samples)
+        out[:, pairs] = np.where(latest < 0, self.start["mode"][pairs], self.changes["mode"][latest])
         return out
+
+    def _latest(self, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+        """The pairs that change, and (n_samples, their count) the index of the change each one's record at each
+        sample comes from (−1: the start). Changes are in time order, so the latest so far is the largest so far."""
+        pairs, column = np.unique(self.changes["pair"], return_inverse=True)
+        at = np.full((n_samples, len(pairs)), -1, np.intp)
+        np.maximum.at(at, (self.changes["sample"], column), np.arange(len(self.changes)))
+        return pairs, np.maximum.accumulate(at, axis=0)
