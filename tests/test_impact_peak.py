@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from grapefmu.physics.kinematics import KINEMATICS
-from grapefmu.solver.sampling import GOLDEN, pair_at
+from grapefmu.solver.sampling import pair_at
 from grapefmu.solver.solver import Solver
 
 from .conftest import dual, scene
@@ -16,6 +16,7 @@ HC = dual(angles=(-0.3, 0.6), contact={"law": "hunt-crossley", "stiffness": 1.1e
 H = 1e-4  # fixed steps: the boundaries fall where the test puts them; ~20 steps over the impact's rise
 #: the sampler's probe sits 1e-3 / N_SAMPLES of a step inside each end: offsets inside it and beyond it
 OFFSETS = (-0.1, -0.02, -1e-3, -1.1e-4, -6e-5, 6e-5, 1.1e-4, 1e-3, 0.02, 0.1)
+GOLDEN = (5 ** 0.5 - 1) / 2
 
 
 def dense_maximum(s: Solver) -> tuple[float, float]:

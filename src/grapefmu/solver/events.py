@@ -14,11 +14,12 @@ import numpy as np
 from ..model.contact import HC_MIN_APPROACH_SPEED, Law
 from ..physics.compiled import inline, jit
 from ..physics.damage import bruise_thresholds, bruising
-from ..physics.forces import pair_law
+from ..physics.forces import pair_force, pair_law
 from ..physics.kinematics import contact_gap, pair_state
 from .step import dense_pair
 
 EV_DELTA, EV_PHI = 0, 1
+EV_FORCE = 2           # not an event: the pair's force, for the peak search (sampling.py), through the same maximiser
 N_SAMPLES = 4          # sub-intervals per step searched for a sign change (plus local-maximum refinement)
 ROOT_TOL = 1e-13       # s, absolute tolerance of event times
 
@@ -28,7 +29,9 @@ def event_value(fn, sign, pr, c, delta, delta_dot):
     """sign·fn of a pair (pr PAIR, c CONTACT record) at penetration δ and rate δ̇."""
     if fn == EV_DELTA:
         return sign * delta
-    return sign * pair_law(pr, c.v_onset, delta, delta_dot)[2]
+    if fn == EV_PHI:
+        return sign * pair_law(pr, c.v_onset, delta, delta_dot)[2]
+    return sign * pair_force(pr, c, delta, delta_dot)[0]
 
 
 @inline
@@ -105,11 +108,12 @@ def far_below(v, v_left, v_right):
 
 
 @jit
-def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work):
+def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work, graze):
     """The largest sign·fn on [a, b] (θ units; fa, fb its values there), by Brent's method (parabolic steps, golden
-    ones where a parabola does not help): returns (θ, value) once a value is positive, the bracket is ROOT_TOL wide,
-    or the largest is far below zero. A graze is a smooth maximum, so the parabolic steps converge in a few
-    evaluations where golden sections alone took thirty to forty."""
+    ones where a parabola does not help): returns (θ, value) once the bracket is ROOT_TOL wide, or for a graze
+    search (`graze`) as soon as a value is positive or the largest is far below zero. A graze and a force peak are
+    smooth maxima, so the parabolic steps converge in a few evaluations where golden sections alone took thirty
+    to forty."""
     pr = M.pair[p]
     cg = 0.3819660112501051  # golden section, 1 − 1/φ
     tol = ROOT_TOL / h
@@ -119,7 +123,7 @@ def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work):
     fw = fv = fx
     d = e = 0.0
     for _ in range(60):
-        if fx > 0.0 or far_below(fx, fa, fb):
+        if graze and (fx > 0.0 or far_below(fx, fa, fb)):
             break
         xm = 0.5 * (a + b)
         tol1 = tol + 1e-15 * abs(x)
@@ -216,7 +220,7 @@ def find_event(y0, q, h, t0, M, contacts, near, n_near, suspect, kin, samples, v
                 if far_below(v, values[lo, col], values[hi, col]):
                     continue  # no graze here
                 th_m, vm = largest_on(fn, sg, p, lo / N_SAMPLES, hi / N_SAMPLES, values[lo, col], values[hi, col],
-                                      y0, q, h, M, contacts, kin, work)
+                                      y0, q, h, M, contacts, kin, work, True)
                 if vm > 0.0:
                     root = locate_root(fn, sg, p, lo / N_SAMPLES, th_m, y0, q, h, M, contacts, kin, work, tol)
                     best = min(best, root)
@@ -292,5 +296,5 @@ def check_bruising(bp, tot, M, pr, cfg):
         tot.bruising_impacts += 1
 
 
-__all__ = ["EV_DELTA", "EV_PHI", "N_SAMPLES", "ROOT_TOL", "classify", "find_event", "switch_pair", "value_at",
+__all__ = ["EV_DELTA", "EV_FORCE", "EV_PHI", "N_SAMPLES", "ROOT_TOL", "classify", "find_event", "switch_pair", "value_at",
            "watched"]

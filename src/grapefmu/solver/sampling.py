@@ -11,7 +11,7 @@ from ..physics.excitation import applied_accel
 from ..physics.forces import active, forces, pair_force, pedicel_tension
 from ..physics.kinematics import Workspace, kinematics, pair_state, rachis_frame
 from ..physics.layout import model_head
-from .events import N_SAMPLES, check_bruising, classify
+from .events import EV_FORCE, N_SAMPLES, check_bruising, classify, largest_on
 from .step import dense_head, dense_pair, dense_rachis
 
 #: Boole's rule on the N_SAMPLES + 1 equally spaced samples: exact for quintics; its error per step,
@@ -26,7 +26,6 @@ BOOLE = np.array([7.0, 32.0, 12.0, 32.0, 7.0]) / 90.0
 #: collision) to 7 % (shaken stiff pair, 230 impacts) slower at rtol 1e-6, for no accuracy a DOPRI5 step can use.
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(N_SAMPLES + 1)  # on [-1, 1]
 GAUSS_X, GAUSS_W = 0.5 * (_NODES + 1.0), 0.5 * _WEIGHTS
-GOLDEN = 0.6180339887498949
 
 
 @jit
@@ -163,27 +162,11 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
                 rise = pair_at(th_in, p, y0, q, h, M, contacts, kin, work)[0] - fbest
                 turning = rise > min(d2, 0.0) * (eps * N_SAMPLES) ** 2
             if turning:
-                # golden-section search between the neighbouring samples (one-sided at the step's ends,
-                # where the peak may sit just inside this step)
-                a = theta_end * max(kbest - 1, 0) / N_SAMPLES
-                b = theta_end * min(kbest + 1, N_SAMPLES) / N_SAMPLES
-                c1 = b - GOLDEN * (b - a)
-                c2 = a + GOLDEN * (b - a)
-                f1 = pair_at(c1, p, y0, q, h, M, contacts, kin, work)[0]
-                f2 = pair_at(c2, p, y0, q, h, M, contacts, kin, work)[0]
-                for _ in range(40):  # one new point a round: the kept one is the next round's other point
-                    if f1 > f2:
-                        b, c2, f2 = c2, c1, f1
-                        c1 = b - GOLDEN * (b - a)
-                        f1 = pair_at(c1, p, y0, q, h, M, contacts, kin, work)[0]
-                    else:
-                        a, c1, f1 = c1, c2, f2
-                        c2 = a + GOLDEN * (b - a)
-                        f2 = pair_at(c2, p, y0, q, h, M, contacts, kin, work)[0]
-                    if (b - a) * h < 1e-12:
-                        break
-                tm = 0.5 * (a + b)
-                fm = pair_at(tm, p, y0, q, h, M, contacts, kin, work)[0]
+                # the maximum between the neighbouring samples, by the graze search's maximiser (one-sided at the
+                # step's ends, where the peak may sit just inside this step)
+                lo, hi = max(kbest - 1, 0), min(kbest + 1, N_SAMPLES)
+                tm, fm = largest_on(EV_FORCE, 1.0, p, theta_end * lo / N_SAMPLES, theta_end * hi / N_SAMPLES,
+                                    fbuf[lo, kk], fbuf[hi, kk], y0, q, h, M, contacts, kin, work, False)
                 if fm > fbest:
                     fbest, tbest = fm, tm
         if fbest > bp.peak_force:
