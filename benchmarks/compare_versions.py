@@ -6,7 +6,8 @@
 Two worker processes, one per version (the other version's `src` first on its path), get the same
 requests in turn, so both run on the same machine state:
 - every scene in scenes/ (the paper's tests included) and every benchmark scene at rtol 1e-10
-  (atol 1e-12): the largest angle difference between the versions on the output grid;
+  (atol 1e-12): the largest angle difference between the versions on the output grid, and, where both
+  versions book the same impacts, the largest difference in their onsets, peak forces and peak times;
 - every benchmark scene over the benchmark's rtol ladder: wall time per simulated second (minimum of
   --repeats, the two versions alternating) and the cost at 1e-6 rad interpolated on each version's own
   work–precision curve against the new version's rtol 1e-13 reference, as `grapefmu bench` does.
@@ -48,7 +49,9 @@ for line in sys.stdin:
     sc = S[req["scene"]]
     if req["op"] == "trajectory":
         run = grapefmu.simulate(sc, rtol=req["rtol"], atol=req["rtol"] * 1e-2, output_interval=1e-3)
-        np.save(req["file"], np.column_stack([run.t, run.angles]))
+        imp = run.impacts
+        np.savez(req["file"], y=np.column_stack([run.t, run.angles]), onset=imp.onset, peak_force=imp.peak_force,
+                 peak_time=imp.peak_time)
         print(json.dumps({"ok": True}), flush=True)
     else:
         t0 = time.perf_counter()
@@ -95,18 +98,29 @@ def main() -> int:
     new, old = Worker(ROOT / "src", "new"), Worker(Path(a.old) / "src", "old")
     tmp = Path(tempfile.mkdtemp())
     worst = 0.0
-    print(f"{'scene':<40} {'max |Δ angle| at rtol 1e-10 (rad)':>34}")
+    print(f"{'scene':<40} {'max |Δ angle| at rtol 1e-10 (rad)':>34} {'impacts':>8} {'|Δ onset| (s)':>14} "
+          f"{'Δ peak force (rel)':>19} {'|Δ peak time| (s)':>18}")
     for name in new.scenes:
         if name not in old.scenes:
             print(f"{name:<40} {'(the old version cannot read it)':>34}")
             continue
-        f_new, f_old = tmp / "n.npy", tmp / "o.npy"
+        f_new, f_old = tmp / "n.npz", tmp / "o.npz"
         new.ask(op="trajectory", scene=name, rtol=1e-10, file=str(f_new))
         old.ask(op="trajectory", scene=name, rtol=1e-10, file=str(f_old))
-        yn, yo = np.load(f_new), np.load(f_old)
+        rn, ro = np.load(f_new), np.load(f_old)
+        yn, yo = rn["y"], ro["y"]
         d = float(np.abs(yn - yo).max()) if yn.shape == yo.shape else math.inf
         worst = max(worst, d)
-        print(f"{name:<40} {d:>34.3e}", flush=True)
+        n = len(rn["onset"])
+        if n != len(ro["onset"]):
+            impacts = f"{n} / {len(ro['onset'])}: the versions' impact counts differ"
+        elif n == 0:
+            impacts = f"{0:>8}"
+        else:
+            rel = np.abs(rn["peak_force"] - ro["peak_force"]) / np.maximum(np.abs(ro["peak_force"]), 1e-300)
+            impacts = (f"{n:>8} {np.abs(rn['onset'] - ro['onset']).max():>14.2e} {rel.max():>19.2e} "
+                       f"{np.abs(rn['peak_time'] - ro['peak_time']).max():>18.2e}")
+        print(f"{name:<40} {d:>34.3e} {impacts}", flush=True)
     print(f"largest difference: {worst:.3e} rad (bound 1e-9)")
     if not a.quick:
         print(f"\n{'benchmark scene':<28} {'old ms/s @1e-6':>15} {'new ms/s @1e-6':>15} {'new/old':>8}"
