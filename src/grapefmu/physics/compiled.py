@@ -18,7 +18,7 @@ def plain_reference_counts() -> bool:
 
     Why: the compiled core extracts arrays from its model and state records all the time, and each extraction costs
     an increment and a decrement of the array's count. Atomic (lock-prefixed) ones took about 60 % of a run's time
-    on the benchmark machine (perf); plain ones cut the paper-collision run by ~25 % at rtol 1e-6 and ~45 % at 1e-10
+    on the benchmark machine (perf); plain ones cut the paper-collision run by about a third at rtol 1e-6 and 1e-10
     (benchmarks/refcounts.py). Safe because every compiled function here holds the GIL (no nogil, no parallel:
     tests/test_compiled.py checks), so no two threads touch a count at once. numba's runtime is process-wide: other
     numba code in the process that releases the GIL needs atomic counts; set GRAPEFMU_ATOMIC_REFCOUNTS=1 for it (or
@@ -38,7 +38,8 @@ def plain_reference_counts() -> bool:
 
 def _plain_inc_dec(module, op, ordering):
     """nrt_atomic_add / nrt_atomic_sub as numba's runtime calls them (a word pointer in, the count after the
-    operation out), without the lock prefix: load, add or subtract one, store, return the new count."""
+    operation out), without the lock prefix: load, add or subtract one, store, return the new count. `ordering` is
+    the memory ordering the atomic version takes; a plain one has none."""
     word = nrtdynmod._word_type
     fn = ir.Function(module, ir.FunctionType(word, [word.as_pointer()]), name=f"nrt_atomic_{op}")
     [ptr] = fn.args
