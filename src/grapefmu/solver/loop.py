@@ -228,8 +228,8 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         if not fixed:
             fac = 10.0 if en == 0.0 else min(10.0, max(0.2, 0.9 * en ** err_exp))
             clk.h = h_prop if (clipped or event) and fac * h < h_prop else h * fac
-            # A contact that opens stiffens the system at once: the step size before it was rejected on about
-            # every second onset. The next one starts no longer than the last contact's first step proposed.
+            # A contact that opens stiffens the system at once, and the step size from before it was often rejected:
+            # the next onset starts no longer than the last contact's first step proposed (docs/solver.md).
             if clk.after_onset:
                 clk.h_contact = clk.h
                 clk.after_onset = False
