@@ -1,61 +1,83 @@
-"""How small a cluster's interacting groups are over a time window (the case for multirate islands, issue 14 item 4):
-runs the Scale section's cluster (pick-and-place, rtol 1e-6, 1 s) and, for each window of H seconds, joins two
-berries whose gap came within `--reach` of closing at some 1 ms sample of the window; prints the largest group's
-size (mean and most over the windows) and the groups of more than one berry.
-Run: .venv/bin/python benchmarks/islands.py [N] [--reach 2e-4]"""
+"""Multirate islands against one step size (issue 14 item 4; docs/solver.md "Multirate islands"): for the Scale
+section's cluster (pick-and-place, rtol 1e-6, 1 s) at each N and window, interleaved, the minimum of a few runs:
+wall time both ways, the islands' compiled work alone (`session.windows`), berry-steps (each island's steps × its
+berries, against steps × N), islands formed and rolled back, and their mean size; then what one step of a
+one-berry island costs against a berry-step of the whole cluster.
+Run: .venv/bin/python benchmarks/islands.py [N ...] [--windows 0.01 0.02 0.04] [--repeats 3]"""
 from __future__ import annotations
 
 import argparse
+import time
 
 import numpy as np
 
 import grapefmu
 from grapefmu.bench.scale import scene
-from grapefmu.physics.kinematics import penetrations
+from grapefmu.solver import islands as isl
+from grapefmu.solver import session as ses
+
+compiled = [0.0]
+_windows = ses.windows
 
 
-def groups(n: int, links: np.ndarray) -> np.ndarray:
-    """Each berry's group (its smallest member) for berry pairs `links` (K, 2)."""
-    parent = np.arange(n)
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for i, j in links:
-        a, b = root(i), root(j)
-        if a != b:
-            parent[max(a, b)] = min(a, b)
-    return np.array([root(i) for i in range(n)])
+def timed_windows(*args):
+    t = time.perf_counter()
+    out = _windows(*args)
+    compiled[0] += time.perf_counter() - t
+    return out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("n", nargs="?", type=int, default=100)
-    ap.add_argument("--reach", type=float, default=2e-4, help="m: a gap this close to closing joins two berries")
+    ap.add_argument("sizes", nargs="*", type=int, default=[10, 30, 100, 300])
+    ap.add_argument("--windows", nargs="+", type=float, default=[0.01, 0.02, 0.04])
+    ap.add_argument("--repeats", type=int, default=3)
     a = ap.parse_args()
-    sc = scene("cluster", a.n)
+    isl.ses.windows = timed_windows
+    for n in a.sizes:
+        sc = scene("cluster", n)
+        whole = grapefmu.simulate(sc)
+        isl.Islands(sc).run(0.3)  # compiled on a warm cache
+        best = {"whole": np.inf} | {w: (np.inf,) for w in a.windows}
+        for _ in range(a.repeats):
+            t = time.perf_counter()
+            grapefmu.simulate(sc)
+            best["whole"] = min(best["whole"], time.perf_counter() - t)
+            for w in a.windows:
+                compiled[0] = 0.0
+                it = isl.Islands(sc, window=w)
+                t = time.perf_counter()
+                run = it.run()
+                wall = time.perf_counter() - t
+                if wall < best[w][0]:
+                    sizes = [len(s.members) for s in it.segments]
+                    steps = sum(len(s.members) * int(s.final[3]["steps"][0]) for s in it.segments)
+                    best[w] = (wall, compiled[0], steps, it.formed, it.rollbacks, float(np.mean(sizes)))
+        print(f"{n}-berry cluster, 1 s: one step size {1e3 * best['whole']:.1f} ms, {whole.stats['steps'] * n} "
+              f"berry-steps")
+        for w in a.windows:
+            wall, work, steps, formed, back, size = best[w]
+            print(f"  islands, window {1e3 * w:g} ms: {1e3 * wall:.1f} ms ({wall / best['whole']:.2f}× one step "
+                  f"size), compiled {1e3 * work:.1f} ms ({work / best['whole']:.2f}×), {steps} berry-steps "
+                  f"({whole.stats['steps'] * n / steps:.1f}× fewer), {formed} formed ({size:.1f} berries on average), "
+                  f"{back} rolled back")
+    # one step of a one-berry island against a berry-step of the whole 100-berry cluster
+    sc = scene("cluster", 100)
+    it = isl.Islands(sc)
+    it.run(0.05)
+    seg = next(s for s in it.batch.segs if len(s.members) == 1)
+    system = seg.system
+    system.rec.cursor["grid_dt"] = 0.0  # no output samples: the steps alone
+    before = int(system.state.book.counters["steps"][0])
+    t = time.perf_counter()
+    it._run(isl._Batch([seg], it.n), system.state.physical.t[0] + 200.0)  # the move is over: a free swing
+    per = (time.perf_counter() - t) / (int(system.state.book.counters["steps"][0]) - before)
     run = grapefmu.simulate(sc)
-    berry_pairs = np.array([(p.i, p.j) for p in sc.model.pairs if p.j < a.n])
-    pen = np.empty((len(run.t), len(sc.model.pairs)))
-    for k in range(len(run.t)):
-        penetrations(run.y[k], sc.model.arrays, pen[k])
-    pen = pen[:, [k for k, p in enumerate(sc.model.pairs) if p.j < a.n]]
-    print(f"{a.n}-berry cluster, {run.t[-1]:g} s: {run.stats['steps']} steps, {len(run.impacts.onset)} impacts")
-    for window in (0.005, 0.01, 0.02, 0.05):
-        w = round(window / 1e-3)
-        largest, multi, sizes = [], [], []
-        for s in range(0, len(run.t) - 1, w):
-            close = pen[s:s + w + 1].max(axis=0) > -a.reach
-            _, counts = np.unique(groups(a.n, berry_pairs[close]), return_counts=True)
-            largest.append(counts.max())
-            multi.append((counts > 1).sum())
-            sizes.extend(counts[counts > 1])
-        print(f"  windows of {window * 1e3:g} ms: largest group {np.mean(largest):.1f} berries on average "
-              f"({max(largest)} at most); {np.mean(multi):.1f} groups of more than one berry, "
-              f"{np.mean(sizes) if sizes else 0:.1f} berries each; the rest alone")
+    t = time.perf_counter()
+    grapefmu.simulate(sc)
+    whole = (time.perf_counter() - t) / (run.stats["steps"] * 100)
+    print(f"one step of a one-berry island (no samples, after the move): {1e6 * per:.1f} µs; a berry-step of the "
+          f"100-berry cluster with one step size (samples included): {1e6 * whole:.2f} µs")
 
 
 if __name__ == "__main__":

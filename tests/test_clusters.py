@@ -15,6 +15,7 @@ from grapefmu.scenefile import load_scene, scene_from_dict
 from grapefmu.physics.kinematics import positions
 from grapefmu.solver.api import simulate
 from grapefmu.solver.components import groups, sub_scene
+from grapefmu.solver.islands import Islands
 from grapefmu.solver.solver import Solver
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
@@ -62,14 +63,39 @@ def test_cluster_matches_the_scipy_reference():
     apart: a 30-berry cluster carried by the pick-and-place move has the reference's impacts (scipy's DOP853
     watching every near pair's events), each at the same time."""
     sc = cluster(30, t_end=1.0, rtol=1e-10)
-    ours = simulate(sc)
     ref = simulate(sc, method="reference")
-    assert ours.collision_count == ref.collision_count > 50
-    np.testing.assert_array_equal(ours.impacts.pair, ref.impacts.pair)
-    np.testing.assert_allclose(ours.impacts.onset, ref.impacts.onset, atol=1e-9)
-    done = ~ours.impacts.ongoing
-    np.testing.assert_allclose(ours.impacts.end[done], ref.impacts.end[~ref.impacts.ongoing], atol=1e-9)
-    assert np.abs(ours.angles - ref.angles).max() < 1e-8
+    for ours in (simulate(sc), Islands(sc).run()):  # one step size, and multirate islands
+        assert ours.collision_count == ref.collision_count > 50
+        np.testing.assert_array_equal(ours.impacts.pair, ref.impacts.pair)
+        np.testing.assert_allclose(ours.impacts.onset, ref.impacts.onset, atol=1e-9)
+        done = ~ours.impacts.ongoing
+        np.testing.assert_allclose(ours.impacts.end[done], ref.impacts.end[~ref.impacts.ongoing], atol=1e-9)
+        assert np.abs(ours.angles - ref.angles).max() < 1e-8
+    assert ours.stats["islands_formed"] > 10
+
+
+def test_islands_that_could_have_met_run_again_as_one():
+    """With windows too long for the first grouping, islands whose berries' travel bounds overlap are rolled back
+    and rerun together (solver/islands.py): the run still has every impact of one Solver of the whole scene at the
+    same time, the same samples to the tolerance, the same counts sample by sample and peaks, and a closed energy
+    ledger."""
+    sc = cluster(30, t_end=1.0, rtol=1e-9)
+    whole = simulate(sc)
+    isl = Islands(sc, window=0.1)
+    run = isl.run()
+    assert isl.rollbacks > 0 and isl.formed > 10
+    np.testing.assert_array_equal(run.impacts.pair, whole.impacts.pair)
+    np.testing.assert_allclose(run.impacts.onset, whole.impacts.onset, atol=1e-8)
+    np.testing.assert_allclose(run.impacts.peak_force, whole.impacts.peak_force, rtol=1e-5)
+    np.testing.assert_array_equal(run.totals["collision_count"], whole.totals["collision_count"])
+    # a sample holds the peaks of the steps before it, so the last: the force's is located (Brent), the tension's
+    # sampled four times a step (docs/solver.md), so it moves with the steps
+    assert run.totals["peak_contact_force"][-1] == pytest.approx(whole.totals["peak_contact_force"][-1], rel=1e-6)
+    assert run.totals["peak_pedicel_tension"][-1] == pytest.approx(whole.totals["peak_pedicel_tension"][-1], rel=1e-4)
+    assert np.abs(run.y - whole.y).max() < 1e-6
+    np.testing.assert_array_equal(run.contact_log.mode(len(run.t)), whole.contact_log.mode(len(whole.t)))
+    assert run.ledger_error() < 1e-7
+    assert run.stats["steps"] > 0 and run.stats["impacts"] == whole.stats["impacts"]
 
 
 def test_pruning_never_drops_a_pair_that_touches():
@@ -168,3 +194,20 @@ def test_cluster_plot_is_drawn(tmp_path):
     sc = scene_from_dict({**cluster_scene(ClusterSpec(berries=12, seed=4)), "solver": {"t_end": 0.05}}, Path.cwd())
     plot_run(simulate(sc), tmp_path / "c.png")
     assert (tmp_path / "c.png").stat().st_size > 20_000
+
+
+def test_islands_keep_the_crate_contacts():
+    """A cluster set down into a padded crate (three obstacles, which every island keeps): multirate islands have
+    one Solver's impacts, on the crate too, at the same times, and a closed energy ledger."""
+    sc = load_scene(Path(__file__).parents[1] / "src/grapefmu/scenes/setdown_fast.toml")
+    sc = replace(sc, solver=replace(sc.solver, rtol=1e-9, atol=1e-12))
+    whole = simulate(sc)
+    isl = Islands(sc)
+    run = isl.run()
+    assert isl.formed > 20
+    crate = [k for k, p in enumerate(sc.model.pairs) if p.j >= sc.model.n_berries]
+    assert np.isin(whole.impacts.pair, crate).sum() > 0
+    np.testing.assert_array_equal(run.impacts.pair, whole.impacts.pair)
+    np.testing.assert_allclose(run.impacts.onset, whole.impacts.onset, atol=1e-8)
+    assert np.abs(run.angles - whole.angles).max() < 1e-6
+    assert run.ledger_error() < 1e-7

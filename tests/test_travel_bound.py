@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from grapefmu.solver.broadphase import travel
+from grapefmu.solver.drift import off_path
 from grapefmu.solver.tableau import DOP853
 
 
@@ -25,3 +26,19 @@ def test_travel_bounds_the_dense_output_and_is_tight():
     q = np.ascontiguousarray(q.T)
     reached = np.abs(sum(q[0, j] * theta ** (j + 1) for j in range(q.shape[1]))).max()
     assert travel(q, 1.0, 0) <= 4 * reached < np.abs(q).sum()
+
+
+def test_the_drift_bound_covers_the_distance_from_the_extrapolated_path():
+    """solver/drift.off_path: never below how far the dense output really gets from the window's extrapolated path
+    q̂ (the step starting e0 off it, the path's slope c1/h and curvature 2 c2/h² over the step)."""
+    rng = np.random.default_rng(11)
+    theta = np.linspace(0.0, 1.0, 4001)
+    for n in (4, 5, 7):
+        for _ in range(200):
+            q = rng.normal(size=(1, n)) * rng.choice([1e-3, 1.0, 300.0])
+            h = float(rng.uniform(1e-5, 1e-2))
+            e0, c1, c2 = rng.normal(size=3) * np.array([1e-4, h, h * h * 50.0])
+            off = e0 + h * sum(q[0, j] * theta ** (j + 1) for j in range(n)) - c1 * theta - c2 * theta ** 2
+            bound = off_path(q, h, 0, e0, c1, c2)
+            assert np.abs(off).max() <= bound * (1 + 1e-12) + 1e-300
+            assert bound <= (abs(e0) + h * np.abs(q).sum() + abs(c1) + abs(c2)) * (1 + 1e-12)

@@ -46,12 +46,13 @@ def groups(model: Model) -> list[list[int]]:
 
 
 def sub_scene(scene: Scene, members: list[int]) -> Scene:
-    """The scene restricted to some berries (their pairs and couplings, renumbered)."""
+    """The scene restricted to some berries (the pairs and couplings among them and with obstacles, renumbered)."""
     m = scene.model
     new = {old: k for k, old in enumerate(members)}
     new.update({m.n_berries + k: len(members) + k for k in range(len(m.obstacles))})  # obstacles follow the berries
-    pairs = tuple(ContactPair(new[p.i], new[p.j], p.law) for p in m.pairs if p.i in new)
-    couplings = tuple(Coupling(new[c.i], new[c.j], c.stiffness, c.damping) for c in m.couplings if c.i in new)
+    pairs = tuple(ContactPair(new[p.i], new[p.j], p.law) for p in m.pairs if p.i in new and p.j in new)
+    couplings = tuple(Coupling(new[c.i], new[c.j], c.stiffness, c.damping) for c in m.couplings
+                      if c.i in new and c.j in new)
     dof = m.dof
     idx = [k for i in members for k in range(dof[i], dof[i + 1])]
     model = Model(tuple(m.berries[i] for i in members), pairs, couplings, m.gravity, obstacles=m.obstacles)

@@ -16,6 +16,7 @@ from ..physics.dynamics import rhs
 from ..physics.excitation import applied_accel
 from ..physics.kinematics import Workspace, kinematics, workspace
 from .broadphase import keep_valid, quiet, rebuild, samples_for
+from .drift import drift
 from .events import N_SAMPLES, classify, find_event, switch_pair
 from .sampling import sample_step
 from .step import dense, dense_coefficients, dense_component, error_norm, initial_step, rk_step
@@ -43,15 +44,18 @@ class Buffers(NamedTuple):
     samples: np.ndarray  # (N_SAMPLES + 1, N) KINEMATICS: the berries at the step's samples
     travel: np.ndarray   # (N, 2) how far each berry can get in the step, rachis and world frame (broadphase.quiet)
     suspect: np.ndarray  # (P,) whether the k-th near pair can switch in the step (broadphase.quiet)
+    path: np.ndarray     # (D + 1, 3) or (0, 3): an island's window's extrapolated angles (drift.anchor)
+    drifted: np.ndarray  # (N,) or (0,): how far each berry got from them (drift.drift)
 
 
 @jit
-def buffers(M, ny):
+def buffers(M, ny, island):
     p = max(M.pair.shape[0], 1)
     return Buffers(np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny),
                    np.zeros((N_SAMPLES + 1, p)), np.zeros((N_SAMPLES + 1, p)),
                    np.zeros((N_SAMPLES + 1, p), dtype=np.int64), np.zeros((N_SAMPLES + 1, 2 * p)), workspace(M),
-                   samples_for(M), np.zeros((M.berry.shape[0], 2)), np.ones(p, dtype=np.bool_))
+                   samples_for(M), np.zeros((M.berry.shape[0], 2)), np.ones(p, dtype=np.bool_),
+                   np.zeros((M.n_dof + 1 if island else 0, 3)), np.zeros(M.berry.shape[0] if island else 0))
 
 
 @inline
@@ -210,6 +214,8 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         clk.t_prev = t0
         clk.h_last = h
         P.t[0] = t_commit
+        if Z.drifted.shape[0] > 0:
+            drift(I.y_prev, q, h, t0, M, Z.path, Z.drifted)
         cnt.steps += 1
         steps += 1
         opened = Bk.totals[0].collision_count

@@ -18,9 +18,10 @@ from ..physics.excitation import applied_accel
 from ..physics.layout import model_offsets
 from ..physics.kinematics import workspace
 from ..physics.observe import observe
-from .loop import REFUSED, integrate
+from .drift import anchor, predict
+from .loop import DONE, REFUSED, integrate
 
-__all__ = ["Session", "advance", "derivative", "new", "refresh", "resume"]
+__all__ = ["Session", "advance", "derivative", "new", "refresh", "previews", "resume", "windows"]
 
 
 @structref.register
@@ -134,3 +135,48 @@ def resume(s, t_target, max_steps):
     status = integrate(s.model, s.excitation, s.tableau, s.state, s.config, s.scratch, s.buffers, t_target,
                        max_steps)
     return status, t_target, s.scratch.cursor[0].n_impacts
+
+
+@jit
+def windows(sessions, first, t_target, max_steps, fresh, members, offsets, pairs, pair_offsets, saved, status,
+            n_impacts, drifted, engaged):
+    """Islands' windows (solver/islands.py) in one call, from island `first` on. Each island, if fresh[k], saves its
+    state (memory -> backup) and its recorder's cursor (into saved[k]) and anchors its path (drift.anchor); it
+    integrates towards t_target, then puts its berries' drift into drifted and whether its pairs are engaged (in
+    contact or in a Zeno window) into engaged, through members and pairs (the islands' scene indices, island k's
+    from offsets[k] and pair_offsets[k]). status[k] is integrate's status, n_impacts[k] the finished impacts in its
+    recorder; stops at the first island whose status is not DONE and returns its index (len(sessions) when all are
+    done)."""
+    for k in range(first, len(sessions)):
+        s = sessions[k]
+        S = s.state
+        if fresh[k]:
+            cur, sv = s.scratch.cursor[0], saved[k]
+            sv.grid_t0, sv.grid_dt, sv.grid_k, sv.n_out = cur.grid_t0, cur.grid_dt, cur.grid_k, cur.n_out
+            sv.n_impacts, sv.n_changes = cur.n_impacts, cur.n_changes
+            s.backup[:] = s.memory
+            anchor(S.physical.y, S.integrator.f, S.physical.t[0], s.model, s.buffers.path, s.buffers.drifted)
+        st = integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, s.buffers, t_target, max_steps)
+        status[k] = st
+        n_impacts[k] = s.scratch.cursor[0].n_impacts
+        if st != DONE:
+            return k
+        d = s.buffers.drifted
+        for m in range(offsets[k], offsets[k + 1]):
+            drifted[members[m]] = d[m - offsets[k]]
+        C = S.physical.contacts
+        for m in range(pair_offsets[k], pair_offsets[k + 1]):
+            c = C[m - pair_offsets[k]]
+            engaged[pairs[m]] = c.mode != 0 or c.smooth
+    return len(sessions)
+
+
+@jit
+def previews(sessions, span, members, offsets, lin, reach):
+    """Every island's berries on the path its next window of length span starts on (drift.anchor, drift.predict),
+    into the scene's lin ((K, N, 3)) and reach ((N, 2)) through members (as `windows` reads them)."""
+    for k in range(len(sessions)):
+        s = sessions[k]
+        S, Z = s.state, s.buffers
+        anchor(S.physical.y, S.integrator.f, S.physical.t[0], s.model, Z.path, Z.drifted)
+        predict(S.physical.y, s.model, Z.path, span, Z.work, Z.W.berry, lin, reach, members[offsets[k]:offsets[k + 1]])

@@ -68,9 +68,16 @@ def _start(S, M, X, skin):
         C[p].mode = mode
         if mode != 0:
             open_impact(S.book.pair[p], S.book.totals[0], t, ddot)
-    kinematics(S.physical.y, M, W.berry)
-    rebuild(M, C, S.book, S.broad_phase, W.berry, skin)
+    restart(S, M, X, skin)
     S.book.counters[0].near_list_rebuilds = 0
+
+
+@jit
+def restart(S, M, X, skin):
+    """A near list and the derivative for a state whose modes are set (a start, or an island formed from others)."""
+    W = workspace(M)
+    kinematics(S.physical.y, M, W.berry)
+    rebuild(M, S.physical.contacts, S.book, S.broad_phase, W.berry, skin)
     ses.derivative(S, M, X)
 
 
@@ -116,35 +123,24 @@ class Solver:
         self._scratch = st.recorder(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
         m, lay, y = self.model, self.layout, self.state.physical.y
         now = (obs.empty(1, m.n_berries, m.n_dof, len(m.pairs)), np.zeros((1, 6)), np.zeros((1, len(m.pairs)), bool))
-        self._buffers = buffers(self.M, self.layout.size)
-        self._session = ses.new(self.M, self.excitation, self.tableau, self.config, self.state, self._scratch,
-                                self._buffers, self._memory, self._backup, now)
+        self._buffers = buffers(self.M, self.layout.size, False)
+        self._now = now
+        self._session = self.session(self._scratch)
         observation, accel, in_contact = now
         self._snapshot = catalogue.Snapshot(self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel,
                                             y[None, lay.base], angular_velocity(lay, y[None]),
                                             orientation(lay, y[None]), np.zeros((1, len(LEDGER_TERMS))),
                                             self.state.book.totals, observation, m.obstacle_pairs)
 
+    def session(self, recorder: st.Recorder) -> ses.Session:
+        """The compiled side of this solver, recording into `recorder` (a face's: the scratch recorder)."""
+        return ses.new(self.M, self.excitation, self.tableau, self.config, self.state, recorder, self._buffers,
+                       self._memory, self._backup, self._now)
+
     # --- state -----------------------------------------------------------------------------------
     def _fresh_state(self, zeno_max: int, t_start: float) -> st.SolverState:
-        lay = self.layout
-        ny, npair, n = lay.size, len(self.model.pairs), lay.n
-        y = initial(lay, self.scene)
-        totals = np.zeros(1, dtype=st.TOTALS)
-        totals["peak_pedicel_tension"] = -np.inf
-        contacts = np.zeros(npair, dtype=st.CONTACT)
-        contacts["v_onset"] = HC_MIN_APPROACH_SPEED
-        S = st.SolverState(
-            physical=st.Physical(np.array([t_start]), y, contacts),
-            input=np.zeros(1, dtype=INPUT),
-            integrator=st.Integrator(np.zeros(ny), y.copy(), np.zeros((self.tableau.p.shape[0], ny)),
-                                     np.zeros((ny, self.tableau.p.shape[1])), np.zeros(1, dtype=st.CLOCK)),
-            book=st.Book(np.zeros(1, dtype=st.BOOK_COUNTERS), totals, np.zeros(npair, dtype=st.BOOK_PAIR),
-                         np.full(n, -np.inf), np.full((npair, zeno_max), -np.inf)),
-            broad_phase=st.BroadPhase(np.zeros(npair, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros((n, 6))),
-            fingerprint=np.array([self._fingerprint()], dtype=np.uint64))
-        if self.config["step_control"][0]:
-            S.book.pair["smooth_until"][self.M.pair["law"] != Law.KELVIN_VOIGT] = np.inf  # no force jump at onset
+        S = blank_state(self.layout, self.tableau, self.M, self.config, zeno_max, t_start, self._fingerprint(),
+                        initial(self.layout, self.scene))
         _start(S, self.M, self.excitation, self.config["skin"][0])
         return S
 
@@ -202,12 +198,7 @@ class Solver:
 
     @property
     def stats(self) -> dict[str, int | float]:
-        c = {k: int(self.state.book.counters[k][0]) for k in st.BOOK_COUNTERS.names}
-        return {"steps": c["steps"], "rejected": c["rejected"], "rhs_evaluations": c["rhs_evaluations"],
-                "switches": c["switches"], "impacts": int(self.state.book.totals["collision_count"][0]),
-                "zeno_guard_activations": c["zeno_activations"], "degrees_of_freedom": self.layout.d,
-                "candidate_pairs": len(self.model.pairs), "near_pairs_mean": c["near_pairs_sum"] / max(c["steps"], 1),
-                "near_list_rebuilds": c["near_list_rebuilds"], "quiet_steps": c["quiet_steps"]}
+        return run_stats(self.state.book.counters, self.state.book.totals, self.layout, len(self.model.pairs))
 
     # --- what the faces report ---------------------------------------------------------------------
     def observe(self, out: obs.Observation | None = None) -> obs.Observation:
@@ -399,8 +390,9 @@ class Solver:
         t, y, accel, totals = (concat([c[i] for c in chunks]) for i in range(st.SAMPLED))
         stats = self.stats | {"wall_time": wall, "method": self.method, "t_start": t_start, "rtol": self.rtol,
                               "atol": self.atol, "fixed_step": self.fixed_step}
+        ongoing = open_impacts(self.state.physical.contacts, self.state.book.pair, self.t)
         return Run(self.scene, t, y, ContactLog(start, concat(changes)), accel, totals,
-                   Impacts.from_records(concat(impacts), self._open_impacts()),
+                   Impacts.from_records(concat(impacts), ongoing),
                    self.state.book.pair["peak_force"].copy(), self.state.book.peak_tension.copy(), stats)
 
     @staticmethod
@@ -410,18 +402,52 @@ class Solver:
         out["sample"] += offset
         return out
 
-    def _open_impacts(self) -> np.ndarray:
-        """The impacts still going on, as rows that end now (separation speed NaN)."""
-        ps = np.flatnonzero(self.state.physical.contacts["mode"] != 0)
-        bp = self.state.book.pair[ps]
-        rows = np.zeros(len(ps), dtype=st.IMPACT)
-        for f in ("onset", "approach_speed", "bruising"):
-            rows[f] = bp[f]
-        rows["peak_force"], rows["peak_time"] = bp["impact_peak"], bp["impact_peak_time"]
-        rows["pair"], rows["end"], rows["separation_speed"] = ps, self.t, np.nan
-        rows["impulse"] = bp["impulse"] - bp["impulse_at_onset"]
-        rows["dissipated"] = bp["dissipated"] - bp["dissipated_at_onset"]
-        return rows
+
+def blank_state(lay, tableau: Tableau, M, config: np.ndarray, zeno_max: int, t: float, fingerprint: int,
+                y: np.ndarray) -> st.SolverState:
+    """A state at time t with y, every pair apart and nothing booked (modes, near list and derivative unset)."""
+    ny, npair, n = lay.size, M.pair.shape[0], lay.n
+    totals = np.zeros(1, dtype=st.TOTALS)
+    totals["peak_pedicel_tension"] = -np.inf
+    contacts = np.zeros(npair, dtype=st.CONTACT)
+    contacts["v_onset"] = HC_MIN_APPROACH_SPEED
+    S = st.SolverState(
+        physical=st.Physical(np.array([t]), y, contacts),
+        input=np.zeros(1, dtype=INPUT),
+        integrator=st.Integrator(np.zeros(ny), y.copy(), np.zeros((tableau.p.shape[0], ny)),
+                                 np.zeros((ny, tableau.p.shape[1])), np.zeros(1, dtype=st.CLOCK)),
+        book=st.Book(np.zeros(1, dtype=st.BOOK_COUNTERS), totals, np.zeros(npair, dtype=st.BOOK_PAIR),
+                     np.full(n, -np.inf), np.full((npair, zeno_max), -np.inf)),
+        broad_phase=st.BroadPhase(np.zeros(npair, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros((n, 6))),
+        fingerprint=np.array([fingerprint], dtype=np.uint64))
+    if config["step_control"][0]:
+        S.book.pair["smooth_until"][M.pair["law"] != Law.KELVIN_VOIGT] = np.inf  # no force jump at onset
+    return S
+
+
+def open_impacts(contacts: np.ndarray, book_pair: np.ndarray, t: float) -> np.ndarray:
+    """The impacts still going on (pairs' CONTACT and BOOK_PAIR records), as rows that end at t (separation speed
+    NaN)."""
+    ps = np.flatnonzero(contacts["mode"] != 0)
+    bp = book_pair[ps]
+    rows = np.zeros(len(ps), dtype=st.IMPACT)
+    for f in ("onset", "approach_speed", "bruising"):
+        rows[f] = bp[f]
+    rows["peak_force"], rows["peak_time"] = bp["impact_peak"], bp["impact_peak_time"]
+    rows["pair"], rows["end"], rows["separation_speed"] = ps, t, np.nan
+    rows["impulse"] = bp["impulse"] - bp["impulse_at_onset"]
+    rows["dissipated"] = bp["dissipated"] - bp["dissipated_at_onset"]
+    return rows
+
+
+def run_stats(counters: np.ndarray, totals: np.ndarray, layout, n_pairs: int) -> dict[str, int | float]:
+    """What a run's work was (BOOK_COUNTERS and TOTALS records, (1,) each), as Run.stats names it."""
+    c = {k: int(counters[k][0]) for k in st.BOOK_COUNTERS.names}
+    return {"steps": c["steps"], "rejected": c["rejected"], "rhs_evaluations": c["rhs_evaluations"],
+            "switches": c["switches"], "impacts": int(totals["collision_count"][0]),
+            "zeno_guard_activations": c["zeno_activations"], "degrees_of_freedom": layout.d,
+            "candidate_pairs": n_pairs, "near_pairs_mean": c["near_pairs_sum"] / max(c["steps"], 1),
+            "near_list_rebuilds": c["near_list_rebuilds"], "quiet_steps": c["quiet_steps"]}
 
 
 def tableau_for(method: str, rtol: float, fixed_step: float) -> Tableau:

@@ -1,0 +1,153 @@
+"""How far each berry drifts from the path its window started on (solver/islands.py, docs/solver.md "Islands").
+
+At a window's start each angle's path is extrapolated, q̂(τ) = q₀ + q̇₀ τ + ½ q̈₀ τ²; the berries' positions on that
+path are known before the window runs (`predict`), and every accepted step bounds how far the angles got from it
+(`drift`, on the step's dense output). A berry then stays within l (Δs + Δt) of its predicted position (u is
+1-Lipschitz in s and in t), so two berries of different islands provably did not meet if their predicted positions
+stay farther apart than their radii and those bounds: a bound on the difference from a shared swing, where a bound
+on each berry's travel would grow with the swing itself.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..physics.compiled import inline, jit
+from ..physics.kinematics import kinematics
+
+
+@inline
+def off_path(q, h, r, e0, c1, c2):
+    """max over θ in [0, 1] of |e0 + (h Q[r, 0] − c1) θ + (h Q[r, 1] − c2) θ² + Σ_(m ≥ 3) h Q[r, m − 1] θ^m|, by the
+    polynomial's Bernstein coefficients (as broadphase.travel): the step's dense output of angle r, less the path."""
+    n = q.shape[1]
+    worst = abs(e0)
+    for i in range(1, n + 1):
+        b = 0.0
+        c = 1.0
+        for m in range(1, i + 1):
+            c *= (i - m + 1) / (n - m + 1)
+            a = h * q[r, m - 1]
+            if m == 1:
+                a -= c1
+            elif m == 2:
+                a -= c2
+            b += c * a
+        worst = max(worst, abs(e0 + b))
+    return worst
+
+
+@jit
+def anchor(y, f, t, M, path, drifted):
+    """Start a window at t: path ((D + 1, 3)) gets each angle's q₀, q̇₀, q̈₀ (y and its derivative f) and, in its
+    last row, t; drifted ((N,)) is zeroed."""
+    nd = M.n_dof
+    for r in range(nd):
+        path[r, 0], path[r, 1], path[r, 2] = y[r], y[nd + r], f[nd + r]
+    path[nd, 0] = t
+    drifted[:] = 0.0
+
+
+@jit
+def drift(y0, q, h, t0, M, path, drifted):
+    """After a step from (t0, y0) with dense coefficients q: drifted[i] becomes at least berry i's largest distance
+    from its predicted position on the step, l (max |s − ŝ| + max |t − t̂|)."""
+    nd = M.n_dof
+    tau = t0 - path[nd, 0]
+    for i in range(M.berry.shape[0]):
+        b = M.berry[i]
+        d = 0.0
+        for r in range(b.dof, b.dof + b.n_angles):
+            q0, v0, a0 = path[r, 0], path[r, 1], path[r, 2]
+            e0 = y0[r] - (q0 + v0 * tau + 0.5 * a0 * tau * tau)
+            d += off_path(q, h, r, e0, h * (v0 + a0 * tau), 0.5 * a0 * h * h)
+        drifted[i] = max(drifted[i], b.twig_length * d)
+
+
+@jit
+def predict(y, M, path, span, work, kin, lin, reach, rows):
+    """The berries' rachis-frame positions on the path at K equally spaced times over the window (lin, (K, ·, 3),
+    berry i's in lin[:, rows[i]]), and for each berry bounds on the path's speed and curvature there (reach[rows[i]]:
+    l Σ (|q̇₀| + |q̈₀| span) and l ((Σ (|q̇₀| + |q̈₀| span))² + Σ |q̈₀|), u's first and second derivatives being at
+    most 1 in each angle)."""
+    nd = M.n_dof
+    K = lin.shape[0]
+    work[:] = y
+    for k in range(K):
+        tau = span * k / (K - 1)
+        for r in range(nd):
+            work[r] = path[r, 0] + path[r, 1] * tau + 0.5 * path[r, 2] * tau * tau
+        kinematics(work, M, kin)
+        for i in range(kin.shape[0]):
+            lin[k, rows[i], 0], lin[k, rows[i], 1], lin[k, rows[i], 2] = kin[i].px, kin[i].py, kin[i].pz
+    for i in range(M.berry.shape[0]):
+        b = M.berry[i]
+        v = 0.0
+        a = 0.0
+        for r in range(b.dof, b.dof + b.n_angles):
+            v += abs(path[r, 1]) + abs(path[r, 2]) * span
+            a += abs(path[r, 2])
+        reach[rows[i], 0] = b.twig_length * v
+        reach[rows[i], 1] = b.twig_length * (v * v + a)
+
+
+
+@jit
+def slack(lin, reach, drifted, radius, pair_i, pair_j, span, far, out):
+    """For each berry-berry pair (pair_i, pair_j), a lower bound on its gap over a window of length span into out:
+    the least distance of the chords between the predicted positions (lin), less the paths' sag from their chords
+    (Δτ²/8 × the curvature bounds in reach), less both berries' drift and radii. A pair still farther apart than
+    `far` with both berries at their paths' speed bounds gets that cheaper bound."""
+    K = lin.shape[0]
+    dt = span / (K - 1)
+    for p in range(pair_i.shape[0]):
+        i, j = pair_i[p], pair_j[p]
+        margin = drifted[i] + drifted[j] + radius[i] + radius[j]
+        cx = lin[0, j, 0] - lin[0, i, 0]
+        cy = lin[0, j, 1] - lin[0, i, 1]
+        cz = lin[0, j, 2] - lin[0, i, 2]
+        bound = math.sqrt(cx * cx + cy * cy + cz * cz) - span * (reach[i, 0] + reach[j, 0]) - margin
+        if bound >= far:
+            out[p] = bound
+            continue
+        near = np.inf
+        for k in range(K - 1):
+            ax, ay, az = cx, cy, cz
+            cx = lin[k + 1, j, 0] - lin[k + 1, i, 0]
+            cy = lin[k + 1, j, 1] - lin[k + 1, i, 1]
+            cz = lin[k + 1, j, 2] - lin[k + 1, i, 2]
+            dx, dy, dz = cx - ax, cy - ay, cz - az
+            dd = dx * dx + dy * dy + dz * dz
+            u = 0.0 if dd == 0.0 else min(1.0, max(0.0, -(ax * dx + ay * dy + az * dz) / dd))
+            ax, ay, az = ax + u * dx, ay + u * dy, az + u * dz
+            near = min(near, math.sqrt(ax * ax + ay * ay + az * az))
+        out[p] = near - dt * dt / 8.0 * (reach[i, 1] + reach[j, 1]) - margin
+
+
+@jit
+def components(n, a, b, label):
+    """Connected components of n nodes joined by the edges (a[e], b[e]) into label (0, 1, … in order of each
+    component's first node); returns how many."""
+    root = np.arange(n)
+    for e in range(a.shape[0]):
+        x, y = a[e], b[e]
+        while root[x] != x:
+            root[x] = root[root[x]]
+            x = root[x]
+        while root[y] != y:
+            root[y] = root[root[y]]
+            y = root[y]
+        if x != y:
+            root[max(x, y)] = min(x, y)
+    count = 0
+    for v in range(n):
+        r = v
+        while root[r] != r:
+            r = root[r]
+        if r == v:
+            label[v] = count
+            count += 1
+        else:
+            label[v] = label[r]
+    return count

@@ -1,0 +1,447 @@
+"""Multirate islands (docs/solver.md, "Islands"): berries that cannot touch each other within a window are
+integrated apart, each island with its own step sizes.
+
+Time is cut into windows on the output grid. At a window's start every berry's angles are extrapolated,
+q̂(τ) = q₀ + q̇₀ τ + ½ q̈₀ τ², and its positions on that path predicted (solver/drift.py); berries whose predicted
+gap, less what they drifted from their paths in the last window, is small share an island (with the pairs among
+them and with the obstacles). Each island then runs its own step sequence to the window's end, bounding on every
+step how far each berry drifts from its path. Berries of different islands provably did not meet if their
+predicted positions stayed farther apart than their radii and those bounds (`Islands._slack`); where a pair fails
+that test, the islands it joins are rolled back to the window's start and run again as one. So every contact is
+located as in one Solver of the whole scene, and a stiff contact in one island never shortens another's steps.
+An island forms from the state its berries' islands left (solver/handover.py; the rachis' motion, which every
+island integrates, from the last of them) and records its own samples, contact changes and impacts, which `run`
+assembles into one Run of the scene: each energy term and count as the sum over islands, each peak as the largest.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+
+import numpy as np
+from numba.typed import List
+
+from ..errors import SolverError
+from ..model.model import Scene
+from ..physics import observe as obs
+from ..physics.layout import layout, layout_of
+from ..results.contacts import ContactLog
+from ..results.impacts import Impacts
+from ..results.records import IMPACT, TOTALS, concat
+from ..results.run import Run
+from . import session as ses
+from . import state as st
+from .loop import IMPACTS_FULL, OUT_FULL, buffers
+from .drift import components, slack
+from .handover import gather, scatter
+from .solver import STATUS_TEXT, Solver, blank_state, open_impacts, run_stats
+
+#: the default window, s: long enough that a window's calls cost little against its steps, short enough that
+#: berries stay near their extrapolated paths (`grapefmu bench --scale` measures other lengths)
+WINDOW = 0.02
+#: predicted positions per berry and window (drift.predict)
+K = 5
+#: m: berries of different islands join for the next window where a pair's slack (Islands._slack, with the drift
+#: of the last window) is below JOIN; berries of one island part where it is above STAY
+JOIN = 2e-4
+STAY = 1e-3
+_COUNTS = ("collision_count", "bruising_impacts", "berries_over_detachment_force")
+_PEAKS = ("peak_contact_force", "peak_pedicel_tension")
+
+
+class _System:
+    """An island's compiled side: its model (the scene's arrays for its berries, pairs and couplings, renumbered),
+    state in one buffer with its backup, buffers, recorder and session. Built once per shape (berries, angles, pairs,
+    couplings) and loaded with another island's berries in place, so that forming an island builds nothing."""
+
+    __slots__ = ("M", "layout", "state", "memory", "backup", "buffers", "now", "parent", "rec", "session")
+
+    def __init__(self, parent: Solver, members: np.ndarray, pairs: np.ndarray, couplings: np.ndarray, rows: int):
+        M = parent.M
+        berry = M.berry[members]
+        self.M = M._replace(berry=berry, pair=M.pair[pairs], coupling=M.coupling[couplings],
+                            n_dof=int(berry["n_angles"].sum()))
+        self.layout = lay = layout(len(members), self.M.n_dof, len(couplings), M.turning)
+        blank = blank_state(lay, parent.tableau, self.M, parent.config, parent.state.book.ring.shape[1], 0.0,
+                            int(parent.state.fingerprint[0]), np.zeros(lay.size))
+        self.memory, self.state = st.pack(blank)
+        self.backup = np.zeros_like(self.memory)
+        self.buffers = buffers(self.M, lay.size, True)
+        self.now = (obs.empty(1, lay.n, lay.d, len(pairs)), np.zeros((1, 6)), np.zeros((1, len(pairs)), bool))
+        self.parent = parent
+        self.rec = st.recorder(rows, lay.size, len(pairs), max(len(pairs), 1) * 64)
+        self.session = self._session()
+
+    def load(self, members: np.ndarray, pairs: np.ndarray, couplings: np.ndarray, local: np.ndarray) -> None:
+        """These berries, pairs and couplings (the system's shape) into the model; local maps scene bodies to the
+        island's (berries first, then the obstacles)."""
+        M, P = self.M, self.parent.M
+        M.berry[:] = P.berry[members]
+        n_angles = M.berry["n_angles"]
+        M.berry["dof"] = np.cumsum(n_angles) - n_angles
+        M.pair[:] = P.pair[pairs]
+        M.coupling[:] = P.coupling[couplings]
+        for a in (M.pair, M.coupling):
+            a["i"], a["j"] = local[a["i"]], local[a["j"]]
+
+    def _session(self) -> ses.Session:
+        p = self.parent
+        return ses.new(self.M, p.excitation, p.tableau, p.config, self.state, self.rec, self.buffers, self.memory,
+                       self.backup, self.now)
+
+    def grow(self) -> None:
+        """Twice the room in the recorder (samples and contact changes)."""
+        old = self.rec
+        n, nc = int(old.cursor["n_out"][0]), int(old.cursor["n_changes"][0])
+        self.rec = st.Recorder(*(np.empty((2 * a.shape[0],) + a.shape[1:], a.dtype) for a in old[:st.SAMPLED]),
+                               np.empty(2 * old.changes.shape[0], old.changes.dtype), old.logged, old.impacts,
+                               old.cursor)
+        for a, b in zip(self.rec[:st.SAMPLED], old[:st.SAMPLED]):
+            a[:n] = b[:n]
+        self.rec.changes[:nc] = old.changes[:nc]
+        self.session = self._session()
+
+
+class _Segment:
+    """One island over the windows it lived through: its berries, pairs and couplings (scene indices), its system,
+    and from output sample k0 on what it recorded (copied out of the system's recorder when it retires)."""
+
+    __slots__ = ("members", "pairs", "couplings", "dofs", "system", "k0", "impacts", "window", "rows", "changes",
+                 "final")
+
+    def __init__(self, members, pairs, couplings, dofs, system, k0):
+        self.members, self.pairs, self.couplings, self.dofs = members, pairs, couplings, dofs
+        self.system, self.k0 = system, k0
+        self.impacts: list[np.ndarray] = []   # finished impacts of the windows kept
+        self.window: list[np.ndarray] = []    # ... of the window in progress
+        self.rows = self.changes = self.final = None  # when it retired: samples, contact changes, closing values
+
+
+class _Batch:
+    """The islands a window runs, as the compiled loop (session.windows) reads them: their sessions in a numba list
+    and their berries and pairs (scene indices) flattened, island k's from offsets[k] and pair_offsets[k]."""
+
+    def __init__(self, segs: list[_Segment], n: int):
+        self.segs, self.n = [], n
+        self.sessions = List()
+        for seg in segs:
+            self.segs.append(seg)
+            self.sessions.append(seg.system.session)
+        self._index()
+
+    def _index(self) -> None:
+        segs = self.segs
+        self.members = np.concatenate([s.members for s in segs])
+        self.offsets = np.r_[0, np.cumsum([len(s.members) for s in segs])].astype(np.int64)
+        self.pairs = np.concatenate([s.pairs for s in segs]).astype(np.int64)
+        self.pair_offsets = np.r_[0, np.cumsum([len(s.pairs) for s in segs])].astype(np.int64)
+        self.saved = np.zeros(len(segs), dtype=st.CURSOR)
+        self.status = np.zeros(len(segs), dtype=np.int64)
+        self.n_impacts = np.zeros(len(segs), dtype=np.int64)
+        self.label = np.empty(self.n, dtype=np.int64)
+        self.label[self.members] = np.repeat(np.arange(len(segs)), np.diff(self.offsets))
+
+    def replace(self, out: list[_Segment], new: list[_Segment]) -> None:
+        """Islands out leave, islands new come (the sessions list changed in place: rebuilding it costs more)."""
+        where = {id(s): k for k, s in enumerate(self.segs)}
+        slots = sorted(where[id(s)] for s in out)
+        for k, seg in zip(slots, new):
+            self.segs[k] = seg
+            self.sessions[k] = seg.system.session
+        for seg in new[len(slots):]:
+            self.segs.append(seg)
+            self.sessions.append(seg.system.session)
+        for k in reversed(slots[len(new):]):  # the last island moves into the free slot
+            last = len(self.segs) - 1
+            if k != last:
+                self.segs[k] = self.segs[last]
+                self.sessions[k] = self.sessions[last]
+            self.segs.pop()
+            self.sessions.pop()
+        self._index()
+
+    def grow(self, k: int) -> None:
+        """Twice the room in island k's recorder."""
+        system = self.segs[k].system
+        system.grow()
+        self.sessions[k] = system.session
+
+
+class Islands:
+    """A whole run of an event-located scene in multirate islands (`run`); `Solver` arguments as in Solver."""
+
+    def __init__(self, scene: Scene, *, rtol: float | None = None, atol: float | None = None,
+                 window: float = WINDOW, max_steps: int = 10_000_000):
+        if scene.solver.method != "event":
+            raise SolverError(f"method: islands run the 'event' method, got {scene.solver.method!r}")
+        if not window > 0.0:
+            raise SolverError(f"window: must be > 0 s, got {window!r}")
+        self.scene, self.rtol, self.atol, self.window, self.max_steps = scene, rtol, atol, window, max_steps
+        self.whole = Solver(scene, rtol=rtol, atol=atol, max_steps=max_steps)  # the start, the settings
+        m = scene.model
+        self.n = m.n_berries
+        self.layout = layout_of(scene)
+        self.radius = np.array([b.radius for b in m.berries])
+        pi = np.array([p.i for p in m.pairs], dtype=int)
+        pj = np.array([p.j for p in m.pairs], dtype=int)
+        between = pj < self.n
+        self.pair_i, self.pair_j = pi[between], pj[between]           # berry-berry pairs
+        self.slack = np.zeros(len(self.pair_i))
+        self.pair_index = np.flatnonzero(between)
+        self.pair_owner, self.pair_other = pi, pj                     # every pair, obstacles too
+        self.coupled = np.array([(c.i, c.j) for c in m.couplings], dtype=int).reshape(-1, 2)
+        self.dof = m.dof
+        self.free: dict[tuple[int, ...], list[_System]] = {}  # systems out of use, by shape
+        self.inside = np.ones(self.n + len(m.obstacles), dtype=bool)  # scratch: the island's bodies
+        self.local = np.zeros(self.n + len(m.obstacles), dtype=np.int64)  # scratch: scene body -> island's
+        self.formed = self.rollbacks = 0
+
+    # --- the state between islands (scene indices) ----------------------------------------------------------
+    def dofs_of(self, members: np.ndarray) -> np.ndarray:
+        """The angles of these berries (scene indices)."""
+        dof = self.dof
+        n = dof[members + 1] - dof[members]
+        return np.repeat(dof[members] - (np.cumsum(n) - n), n) + np.arange(n.sum())
+
+    def _start(self) -> None:
+        """The scene's state between islands, from the start Solver(scene) made."""
+        S = self.whole.state
+        self.G = (S.physical.y.copy(), S.physical.contacts.copy(), S.book.pair.copy(), S.book.ring.copy(),
+                  S.book.peak_tension.copy(), np.zeros(self.n), np.zeros(self.n))
+        lay = self.layout
+        self.scene_offsets = np.array([lay.base_velocity.start, lay.d_hinge.start, lay.d_coupling.start, lay.d])
+
+    def _retire(self, seg: _Segment) -> None:
+        """Put a segment's state into the scene's, copy out its record and free its system."""
+        system = seg.system
+        S, sl = system.state, system.layout
+        scatter(S, system.M, self.G, seg.members, seg.dofs, seg.pairs, seg.couplings, self.scene_offsets)
+        y = S.physical.y
+        seg.final = (float(y[sl.d_contact]), float(y[sl.work]), S.book.totals.copy(), S.book.counters.copy())
+        rec = system.rec
+        n, nc = int(rec.cursor["n_out"][0]), int(rec.cursor["n_changes"][0])
+        seg.rows = tuple(a[:n].copy() for a in rec[:st.SAMPLED])
+        seg.changes = rec.changes[:nc].copy()
+        seg.impacts += seg.window
+        seg.window = []
+        self.segments.append(seg)
+        self.free.setdefault(system.layout[:3] + (len(seg.pairs),), []).append(system)
+
+    def _form(self, members: np.ndarray, t: float, k0: int) -> _Segment:
+        """An island of these berries (ascending) at time t, from the scene's state, recording from sample k0."""
+        inside = self.inside
+        inside[:self.n] = False
+        inside[members] = True
+        pairs = np.flatnonzero(inside[self.pair_owner] & inside[self.pair_other])
+        couplings = np.flatnonzero(inside[self.coupled[:, 0]] & inside[self.coupled[:, 1]])
+        dofs = self.dofs_of(members)
+        local = self.local
+        local[members] = np.arange(len(members))
+        local[self.n:] = len(members) + np.arange(len(local) - self.n)  # obstacles follow the berries
+        shape = (len(members), len(dofs), len(couplings), len(pairs))
+        pool = self.free.get(shape)
+        system = pool.pop() if pool else _System(self.whole, members, pairs, couplings, min(self.n_samples, 256))
+        system.load(members, pairs, couplings, local)
+        w = self.whole
+        gather(system.state, system.M, w.excitation, w.config["skin"][0], self.G, members, dofs, pairs, couplings,
+               self.scene_offsets, t)
+        cur = system.rec.cursor
+        cur["grid_t0"], cur["grid_dt"], cur["grid_k"] = self.t0, self.dt, k0
+        cur["n_out"] = cur["n_impacts"] = cur["n_changes"] = 0
+        system.rec.logged[:] = system.state.physical.contacts
+        self.formed += 1
+        return _Segment(members, pairs, couplings, dofs, system, k0)
+
+    # --- windows ----------------------------------------------------------------------------------------------
+    def _run(self, batch: _Batch, t_w: float) -> None:
+        """Every island of the batch to t_w in compiled calls: each saves its state and anchors its path first; a
+        full recorder grows, finished impacts go to the island's window list."""
+        fresh = np.ones(len(batch.segs), dtype=bool)
+        k = 0
+        while True:
+            batch.n_impacts[:] = 0
+            k = ses.windows(batch.sessions, k, t_w, self.max_steps, fresh, batch.members, batch.offsets, batch.pairs,
+                            batch.pair_offsets, batch.saved, batch.status, batch.n_impacts, self.drifted, self.engaged)
+            for m in np.flatnonzero(batch.n_impacts):
+                seg = batch.segs[m]
+                seg.window.append(seg.system.rec.impacts[:batch.n_impacts[m]].copy())
+                seg.system.rec.cursor["n_impacts"] = 0
+                self.pending.add(seg)
+            if k == len(batch.segs):
+                return
+            status, seg = batch.status[k], batch.segs[k]
+            fresh[k] = False
+            if status == OUT_FULL:
+                batch.grow(k)
+            elif status != IMPACTS_FULL:
+                t = seg.system.state.physical.t[0]
+                seg.system.memory[:] = seg.system.backup
+                raise SolverError(f"integration stopped at t = {t:.9g} s: {STATUS_TEXT.get(status, f'status {status}')}")
+
+    def _slack(self, span: float) -> np.ndarray:
+        """For each berry-berry pair, a lower bound on its gap over the window (drift.slack)."""
+        slack(self.lin, self.reach, self.drifted, self.radius, self.pair_i, self.pair_j, span, STAY, self.slack)
+        return self.slack
+
+    def _components(self, slack: np.ndarray, label: np.ndarray) -> np.ndarray:
+        """Each berry's island for the next window (a label): berries joined by a pair in contact or in a Zeno window,
+        a coupling, or a pair whose slack is below JOIN; a pair of one island (label) stays joined while its slack
+        is below STAY, so that islands do not form and part on every window."""
+        i, j = self.pair_i, self.pair_j
+        join = self.engaged[self.pair_index] | (slack < JOIN) | ((label[i] == label[j]) & (slack < STAY))
+        label = np.empty(self.n, dtype=np.int64)
+        components(self.n, np.concatenate([i[join], self.coupled[:, 0]]), np.concatenate([j[join], self.coupled[:, 1]]),
+                   label)
+        return label
+
+    def _regroup(self, t: float, t_w: float, k: int) -> None:
+        """Islands for the window [t, t_w]: predict every berry's path (its drift taken from the last window), retire
+        the islands whose berries now group otherwise and form the new groups."""
+        b = self.batch
+        ses.previews(b.sessions, t_w - t, b.members, b.offsets, self.lin, self.reach)
+        comp = self._components(self._slack(t_w - t), b.label)
+        size = np.bincount(comp)
+        out = []
+        for seg in b.segs:
+            c = comp[seg.members]
+            if not ((c == c[0]).all() and size[c[0]] == len(seg.members)):
+                out.append(seg)
+        if out:
+            for seg in out:
+                self._retire(seg)
+            moved = np.concatenate([seg.members for seg in out])
+            b.replace(out, [self._form(np.flatnonzero(comp == c), t, k) for c in np.unique(comp[moved])])
+
+    def _window(self, t: float, t_w: float, k: int) -> None:
+        """Run every island to t_w; where berries of different islands could have met, roll their islands back and
+        run them again as one."""
+        for seg in self.pending:  # the last window's impacts are kept
+            seg.impacts += seg.window
+            seg.window = []
+        self.pending.clear()
+        b = self.batch
+        self._run(b, t_w)
+        while True:
+            label = b.label
+            bad = (label[self.pair_i] != label[self.pair_j]) & (self._slack(t_w - t) <= 1e-12)
+            if not bad.any():
+                return
+            x, y = label[self.pair_i[bad]], label[self.pair_j[bad]]
+            comp = np.empty(len(b.segs), dtype=np.int64)
+            components(len(b.segs), x, y, comp)
+            size = np.bincount(comp)
+            groups: dict[int, list[int]] = {}
+            for m in np.flatnonzero(size[comp] > 1):
+                groups.setdefault(comp[m], []).append(m)
+            out, new = [], []
+            for members in groups.values():
+                for m in members:
+                    seg = b.segs[m]
+                    seg.system.memory[:] = seg.system.backup
+                    seg.system.rec.cursor[:] = b.saved[m]
+                    seg.window = []
+                    self._retire(seg)
+                    out.append(seg)
+                self.rollbacks += 1
+                new.append(self._form(np.sort(np.concatenate([b.segs[m].members for m in members])), t, k))
+            self._run(_Batch(new, self.n), t_w)
+            b.replace(out, new)
+
+    # --- the run ----------------------------------------------------------------------------------------------
+    def run(self, t_end: float | None = None, output_interval: float | None = None,
+            progress: Callable[[float, float], None] | None = None) -> Run:
+        """The scene from its start to t_end (Solver.run's arguments), as one Run. Its stats count every island's
+        steps and evaluations, and how many islands formed and were rolled back."""
+        s = self.scene.solver
+        t_end = s.t_end if t_end is None else float(t_end)
+        self.dt = dt = s.output_interval if output_interval is None else float(output_interval)
+        self.t0 = t0 = self.whole.t
+        self.n_samples = n = int(math.floor((t_end - t0) / dt + 1e-9)) + 1
+        self.per = per = max(1, int(round(self.window / dt)))
+        self.zero_totals = np.zeros(1, dtype=TOTALS)
+        self.zero_totals["peak_pedicel_tension"] = -np.inf
+        self._start()
+        S0 = self.whole.state
+        self.start = (S0.physical.y.copy(), S0.book.totals.copy(), S0.physical.contacts.copy(), self.whole.base_accel)
+        self.segments: list[_Segment] = []
+        wall_start = time.perf_counter()
+        self.lin, self.reach = np.zeros((K, self.n, 3)), np.zeros((self.n, 2))
+        self.drifted = np.zeros(self.n)
+        self.engaged = np.zeros(len(self.scene.model.pairs), dtype=bool)
+        self.pending: set[_Segment] = set()
+        self.batch = _Batch([self._form(np.arange(self.n), t0, 1)], self.n)  # one island to predict from, split at once
+        k = 0
+        while k < n - 1:
+            k_w = min(k + per, n - 1)
+            t = t0 + k * dt
+            t_w = t0 + k_w * dt if k_w < n - 1 else t_end
+            self._regroup(t, t_w, k + 1)
+            self._window(t, t_w, k + 1)
+            k = k_w
+            if progress:
+                progress(t_w, t_end)
+        for seg in self.batch.segs:
+            self._retire(seg)
+        return self._assemble(t_end, time.perf_counter() - wall_start)
+
+    def _assemble(self, t_end: float, wall: float) -> Run:
+        """One Run of the scene from the segments (as a Solver of the whole scene would record it)."""
+        lay, n = self.layout, self.n_samples
+        t = self.t0 + np.arange(n) * self.dt
+        t[-1] = min(t[-1], t_end)
+        y = np.zeros((n, lay.size))
+        accel = np.zeros((n, 6))
+        totals = np.zeros(n, dtype=TOTALS)
+        totals["peak_pedicel_tension"] = -np.inf
+        y[0], totals0, contacts0, accel[0] = self.start
+        for f in (*_COUNTS, *_PEAKS):  # the pairs that start in contact are counted at the start (Solver's _start)
+            totals[f] = totals0[f][0]
+        counters = np.zeros(1, dtype=st.BOOK_COUNTERS)
+        finished, changes = [], []
+        for seg in self.segments:
+            sl = seg.system.layout
+            ts_, ys, accels, ts = seg.rows
+            r = len(ts_)
+            rows = slice(seg.k0, seg.k0 + r)
+            after = slice(seg.k0 + r, n)
+            y[rows, lay.q.start + seg.dofs] = ys[:, sl.q]
+            y[rows, lay.w.start + seg.dofs] = ys[:, sl.w]
+            y[rows, lay.d_hinge.start + seg.members] = ys[:, sl.d_hinge]
+            y[rows, lay.d_coupling.start + seg.couplings] = ys[:, sl.d_coupling]
+            y[rows, lay.base_velocity.start:lay.d_hinge.start] = ys[:, sl.base_velocity.start:sl.d_hinge.start]
+            d_contact, work, tot, done = seg.final
+            y[rows, lay.d_contact] += ys[:, sl.d_contact]
+            y[after, lay.d_contact] += d_contact
+            y[rows, lay.work] += ys[:, sl.work]
+            y[after, lay.work] += work
+            accel[rows] = accels
+            for f in _COUNTS:
+                totals[f][rows] += ts[f]
+                totals[f][after] += tot[f][0]
+            for f in _PEAKS:
+                totals[f][rows] = np.maximum(totals[f][rows], ts[f])
+                totals[f][after] = np.maximum(totals[f][after], tot[f][0])
+            for f in st.BOOK_COUNTERS.names:
+                counters[f] += done[f]
+            ch = seg.changes.copy()
+            ch["sample"] += seg.k0
+            ch["pair"] = seg.pairs[ch["pair"]]
+            changes.append(ch)
+            for rec in seg.impacts:
+                rec = rec.copy()
+                rec["pair"] = seg.pairs[rec["pair"]]
+                finished.append(rec)
+        ongoing = open_impacts(self.G[1], self.G[2], t[-1])
+        changes = concat(changes) if changes else np.zeros(0, dtype=st.CHANGE)
+        log = ContactLog(contacts0, changes[np.argsort(changes["sample"], kind="stable")])
+        impacts = concat(finished) if finished else np.zeros(0, dtype=IMPACT)
+        impacts = impacts[np.argsort(impacts["end"], kind="stable")]
+        stats = run_stats(counters, totals[-1:], lay, len(self.scene.model.pairs))
+        stats |= {"wall_time": wall, "method": "event", "t_start": self.t0, "rtol": self.whole.rtol,
+                  "atol": self.whole.atol, "fixed_step": self.whole.fixed_step, "islands_formed": self.formed,
+                  "island_rollbacks": self.rollbacks, "window": self.window}
+        return Run(self.scene, t, y, log, accel, totals, Impacts.from_records(impacts, ongoing),
+                   self.G[2]["peak_force"].copy(), self.G[4].copy(), stats)
+
+
