@@ -142,9 +142,12 @@ class _Batch:
         self.label = np.empty(self.n, dtype=np.int64)
         self.label[self.members] = np.repeat(np.arange(len(segs)), np.diff(self.offsets))
 
-    def replace(self, out: list[_Segment], new: list[_Segment]) -> None:
-        """Islands out leave, islands new come (the sessions list changed in place: rebuilding it costs more)."""
+    def replace(self, out: list[_Segment], new: list[_Segment], ran: _Batch | None = None) -> None:
+        """Islands out leave, islands new come (the sessions list changed in place: rebuilding it costs more). Within
+        a window (ran: the batch the new islands ran in) each island keeps its saved cursor, for a later rollback."""
         where = {id(s): k for k, s in enumerate(self.segs)}
+        saved = {} if ran is None else {id(s): self.saved[k].copy() for k, s in enumerate(self.segs)} | {
+            id(s): ran.saved[k].copy() for k, s in enumerate(ran.segs)}
         slots = sorted(where[id(s)] for s in out)
         for k, seg in zip(slots, new):
             self.segs[k] = seg
@@ -160,6 +163,8 @@ class _Batch:
             self.segs.pop()
             self.sessions.pop()
         self._index()
+        for k, seg in enumerate(self.segs if saved else ()):
+            self.saved[k] = saved[id(seg)]
 
     def grow(self, k: int) -> None:
         """Twice the room in island k's recorder."""
@@ -345,8 +350,9 @@ class Islands:
                     out.append(seg)
                 self.rollbacks += 1
                 new.append(self._form(np.sort(np.concatenate([b.segs[m].members for m in members])), t, k))
-            self._run(_Batch(new, self.n), t_w)
-            b.replace(out, new)
+            ran = _Batch(new, self.n)
+            self._run(ran, t_w)
+            b.replace(out, new, ran)
 
     # --- the run ----------------------------------------------------------------------------------------------
     def run(self, t_end: float | None = None, output_interval: float | None = None,
@@ -359,8 +365,6 @@ class Islands:
         self.t0 = t0 = self.whole.t
         self.n_samples = n = int(math.floor((t_end - t0) / dt + 1e-9)) + 1
         self.per = per = max(1, int(round(self.window / dt)))
-        self.zero_totals = np.zeros(1, dtype=TOTALS)
-        self.zero_totals["peak_pedicel_tension"] = -np.inf
         self._start()
         S0 = self.whole.state
         self.start = (S0.physical.y.copy(), S0.book.totals.copy(), S0.physical.contacts.copy(), self.whole.base_accel)
