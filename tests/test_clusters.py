@@ -211,3 +211,26 @@ def test_islands_keep_the_crate_contacts():
     np.testing.assert_allclose(run.impacts.onset, whole.impacts.onset, atol=1e-8)
     assert np.abs(run.angles - whole.angles).max() < 1e-6
     assert run.ledger_error() < 1e-7
+
+
+def test_islands_merged_twice_in_one_window_keep_what_they_recorded(monkeypatch):
+    """A row struck at one end: with every berry its own island from the start and islands never regrouped (only the
+    rollbacks merge them), the struck berry's island merges with its neighbour's, and that island with the next in
+    a second round of the same window: each island rolls back to the cursor it saved at the window's start, so the
+    samples it recorded in the windows before stay (they were lost once), and the run is one Solver's."""
+    calls = []
+
+    def singletons_then_kept(self, slack, label):
+        calls.append(1)
+        return np.arange(self.n) if len(calls) == 1 else label.copy()
+
+    monkeypatch.setattr(Islands, "_components", singletons_then_kept)
+    sc = row_scene(RowSpec(berries=4, pitch=0.028, angles=(-0.5, -0.014, 0.017, 0.048),
+                           solver={"rtol": 1e-9, "atol": 1e-12, "t_end": 0.4, "output_interval": 1e-3}))
+    sc = scene_from_dict(sc, Path.cwd())
+    whole = simulate(sc)
+    isl = Islands(sc, window=0.05)
+    run = isl.run()
+    assert isl.rollbacks >= 2
+    np.testing.assert_array_equal(run.impacts.pair, whole.impacts.pair)
+    assert np.abs(run.y - whole.y).max() < 1e-6
