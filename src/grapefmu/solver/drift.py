@@ -40,8 +40,8 @@ def off_path(q, h, r, e0, c1, c2):
 
 @jit
 def anchor(y, f, t, M, path, drifted):
-    """Start a window at t: path ((D + 1, 3)) gets each angle's q₀, q̇₀, q̈₀ (y and its derivative f) and, in its
-    last row, t; drifted ((N,)) is zeroed."""
+    """Start a window at t: path ((D + 1, 3)) gets each angle's q₀, q̇₀, q̈₀ (y and its derivative f: the path
+    `predict` places the berries on) and, in its last row, t; drifted ((N,)) is zeroed."""
     nd = M.n_dof
     for r in range(nd):
         path[r, 0], path[r, 1], path[r, 2] = y[r], y[nd + r], f[nd + r]
@@ -66,18 +66,18 @@ def drift(y0, q, h, t0, M, path, drifted):
 
 
 @jit
-def predict(y, M, path, span, work, kin, lin, reach, rows):
-    """The berries' rachis-frame positions on the path at K equally spaced times over the window (lin, (K, ·, 3),
-    berry i's in lin[:, rows[i]]), and for each berry bounds on the path's speed and curvature there (reach[rows[i]]:
-    l Σ (|q̇₀| + |q̈₀| span) and l ((Σ (|q̇₀| + |q̈₀| span))² + Σ |q̈₀|), u's first and second derivatives being at
-    most 1 in each angle)."""
+def predict(y, f, M, span, work, kin, lin, reach, rows):
+    """The berries' rachis-frame positions on the path a window starting at (y, its derivative f) anchors, at K
+    equally spaced times over its length span (lin, (K, ·, 3), berry i's in lin[:, rows[i]]), and for each berry
+    bounds on the path's speed and curvature there (reach[rows[i]]: l Σ (|q̇₀| + |q̈₀| span) and
+    l ((Σ (|q̇₀| + |q̈₀| span))² + Σ |q̈₀|), u's first and second derivatives being at most 1 in each angle)."""
     nd = M.n_dof
     K = lin.shape[0]
     work[:] = y
     for k in range(K):
         tau = span * k / (K - 1)
         for r in range(nd):
-            work[r] = path[r, 0] + path[r, 1] * tau + 0.5 * path[r, 2] * tau * tau
+            work[r] = y[r] + y[nd + r] * tau + 0.5 * f[nd + r] * tau * tau
         kinematics(work, M, kin)
         for i in range(kin.shape[0]):
             lin[k, rows[i], 0], lin[k, rows[i], 1], lin[k, rows[i], 2] = kin[i].px, kin[i].py, kin[i].pz
@@ -86,11 +86,10 @@ def predict(y, M, path, span, work, kin, lin, reach, rows):
         v = 0.0
         a = 0.0
         for r in range(b.dof, b.dof + b.n_angles):
-            v += abs(path[r, 1]) + abs(path[r, 2]) * span
-            a += abs(path[r, 2])
+            v += abs(y[nd + r]) + abs(f[nd + r]) * span
+            a += abs(f[nd + r])
         reach[rows[i], 0] = b.twig_length * v
         reach[rows[i], 1] = b.twig_length * (v * v + a)
-
 
 
 @jit

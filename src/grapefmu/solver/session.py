@@ -173,10 +173,10 @@ def windows(sessions, first, t_target, max_steps, fresh, members, offsets, pairs
 
 @jit
 def previews(sessions, span, members, offsets, lin, reach):
-    """Every island's berries on the path its next window of length span starts on (drift.anchor, drift.predict),
-    into the scene's lin ((K, N, 3)) and reach ((N, 2)) through members (as `windows` reads them)."""
+    """Every island's berries on the path its next window of length span starts on (drift.predict), into the
+    scene's lin ((K, N, 3)) and reach ((N, 2)) through members (as `windows` reads them)."""
     for k in range(len(sessions)):
         s = sessions[k]
         S, Z = s.state, s.buffers
-        anchor(S.physical.y, S.integrator.f, S.physical.t[0], s.model, Z.path, Z.drifted)
-        predict(S.physical.y, s.model, Z.path, span, Z.work, Z.W.berry, lin, reach, members[offsets[k]:offsets[k + 1]])
+        predict(S.physical.y, S.integrator.f, s.model, span, Z.work, Z.W.berry, lin, reach,
+                members[offsets[k]:offsets[k + 1]])

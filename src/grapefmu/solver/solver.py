@@ -124,18 +124,13 @@ class Solver:
         m, lay, y = self.model, self.layout, self.state.physical.y
         now = (obs.empty(1, m.n_berries, m.n_dof, len(m.pairs)), np.zeros((1, 6)), np.zeros((1, len(m.pairs)), bool))
         self._buffers = buffers(self.M, self.layout.size, False)
-        self._now = now
-        self._session = self.session(self._scratch)
+        self._session = ses.new(self.M, self.excitation, self.tableau, self.config, self.state, self._scratch,
+                                self._buffers, self._memory, self._backup, now)
         observation, accel, in_contact = now
         self._snapshot = catalogue.Snapshot(self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel,
                                             y[None, lay.base], angular_velocity(lay, y[None]),
                                             orientation(lay, y[None]), np.zeros((1, len(LEDGER_TERMS))),
                                             self.state.book.totals, observation, m.obstacle_pairs)
-
-    def session(self, recorder: st.Recorder) -> ses.Session:
-        """The compiled side of this solver, recording into `recorder` (a face's: the scratch recorder)."""
-        return ses.new(self.M, self.excitation, self.tableau, self.config, self.state, recorder, self._buffers,
-                       self._memory, self._backup, self._now)
 
     # --- state -----------------------------------------------------------------------------------
     def _fresh_state(self, zeno_max: int, t_start: float) -> st.SolverState:
