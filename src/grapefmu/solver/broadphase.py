@@ -84,16 +84,22 @@ def travel(q, h, r):
     largest Bernstein coefficient of h Σ_j Q[r, j] θ^(j+1) (a polynomial on [0, 1] lies within its Bernstein
     coefficients; β_i = Σ_{m ≤ i} C(i, m) / C(n, m) a_m from the power coefficients a_m, a_0 = 0). Tight where
     Σ_j |Q[r, j]| is not: DOP853's power-basis coefficients reach several hundred and cancel."""
-    n = q.shape[1]
     worst = 0.0
-    for i in range(1, n + 1):
-        b = 0.0
-        c = 1.0
-        for m in range(1, i + 1):
-            c *= (i - m + 1) / (n - m + 1)
-            b += c * q[r, m - 1]
-        worst = max(worst, abs(b))
+    for i in range(1, q.shape[1] + 1):
+        worst = max(worst, abs(bernstein(q, r, i)))
     return h * worst
+
+
+@inline
+def bernstein(q, r, i):
+    """Σ_(m ≤ i) C(i, m) / C(n, m) Q[r, m − 1]: the i-th Bernstein coefficient of Σ_j Q[r, j] θ^(j+1), degree n."""
+    n = q.shape[1]
+    b = 0.0
+    c = 1.0
+    for m in range(1, i + 1):
+        c *= (i - m + 1) / (n - m + 1)
+        b += c * q[r, m - 1]
+    return b
 
 
 @jit

@@ -15,26 +15,18 @@ import numpy as np
 
 from ..physics.compiled import inline, jit
 from ..physics.kinematics import kinematics
+from .broadphase import bernstein
 
 
 @inline
 def off_path(q, h, r, e0, c1, c2):
-    """max over θ in [0, 1] of |e0 + (h Q[r, 0] − c1) θ + (h Q[r, 1] − c2) θ² + Σ_(m ≥ 3) h Q[r, m − 1] θ^m|, by the
-    polynomial's Bernstein coefficients (as broadphase.travel): the step's dense output of angle r, less the path."""
+    """max over θ in [0, 1] of |e0 + h Σ_j Q[r, j] θ^(j+1) − c1 θ − c2 θ²|, by the polynomial's Bernstein coefficients
+    (those of θ and θ² are i/n and i(i − 1)/(n(n − 1)); broadphase.travel is the case e0 = c1 = c2 = 0): the step's
+    dense output of angle r, less the path."""
     n = q.shape[1]
     worst = abs(e0)
     for i in range(1, n + 1):
-        b = 0.0
-        c = 1.0
-        for m in range(1, i + 1):
-            c *= (i - m + 1) / (n - m + 1)
-            a = h * q[r, m - 1]
-            if m == 1:
-                a -= c1
-            elif m == 2:
-                a -= c2
-            b += c * a
-        worst = max(worst, abs(e0 + b))
+        worst = max(worst, abs(e0 + h * bernstein(q, r, i) - c1 * i / n - c2 * i * (i - 1) / (n * (n - 1))))
     return worst
 
 

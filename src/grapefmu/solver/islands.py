@@ -182,12 +182,12 @@ class Islands:
             raise SolverError(f"method: islands run the 'event' method, got {scene.solver.method!r}")
         if not window > 0.0:
             raise SolverError(f"window: must be > 0 s, got {window!r}")
-        self.scene, self.rtol, self.atol, self.window, self.max_steps = scene, rtol, atol, window, max_steps
+        self.scene, self.window, self.max_steps = scene, window, max_steps
         self.whole = Solver(scene, rtol=rtol, atol=atol, max_steps=max_steps)  # the start, the settings
         m = scene.model
         self.n = m.n_berries
         self.layout = layout_of(scene)
-        self.radius = np.array([b.radius for b in m.berries])
+        self.radius = self.whole.M.berry["radius"].copy()
         pi = np.array([p.i for p in m.pairs], dtype=int)
         pj = np.array([p.j for p in m.pairs], dtype=int)
         between = pj < self.n
@@ -200,7 +200,6 @@ class Islands:
         self.free: dict[tuple[int, ...], list[_System]] = {}  # systems out of use, by shape
         self.inside = np.ones(self.n + len(m.obstacles), dtype=bool)  # scratch: the island's bodies
         self.local = np.zeros(self.n + len(m.obstacles), dtype=np.int64)  # scratch: scene body -> island's
-        self.formed = self.rollbacks = 0
 
     # --- the state between islands (scene indices) ----------------------------------------------------------
     def dofs_of(self, members: np.ndarray) -> np.ndarray:
@@ -210,12 +209,16 @@ class Islands:
         return np.repeat(dof[members] - (np.cumsum(n) - n), n) + np.arange(n.sum())
 
     def _start(self) -> None:
-        """The scene's state between islands, from the start Solver(scene) made."""
+        """The scene's state between islands, and what the run's first sample holds, from the start Solver(scene)
+        made; nothing formed or rolled back yet."""
         S = self.whole.state
         self.G = (S.physical.y.copy(), S.physical.contacts.copy(), S.book.pair.copy(), S.book.ring.copy(),
                   S.book.peak_tension.copy(), np.zeros(self.n), np.zeros(self.n))
+        self.start = (S.physical.y.copy(), S.book.totals.copy(), S.physical.contacts.copy(), self.whole.base_accel)
         lay = self.layout
         self.scene_offsets = np.array([lay.base_velocity.start, lay.d_hinge.start, lay.d_coupling.start, lay.d])
+        self.segments: list[_Segment] = []
+        self.formed = self.rollbacks = 0
 
     def _retire(self, seg: _Segment) -> None:
         """Put a segment's state into the scene's, copy out its record and free its system."""
@@ -366,9 +369,6 @@ class Islands:
         self.n_samples = n = int(math.floor((t_end - t0) / dt + 1e-9)) + 1
         self.per = per = max(1, int(round(self.window / dt)))
         self._start()
-        S0 = self.whole.state
-        self.start = (S0.physical.y.copy(), S0.book.totals.copy(), S0.physical.contacts.copy(), self.whole.base_accel)
-        self.segments: list[_Segment] = []
         wall_start = time.perf_counter()
         self.lin, self.reach = np.zeros((K, self.n, 3)), np.zeros((self.n, 2))
         self.drifted = np.zeros(self.n)
