@@ -105,8 +105,13 @@ def test_real_time_stamps_follow_the_ros_clock(ros, tmp_path):
         ctl.wait_for(lambda: len(lags) > 500)
         ctl.close()
     lags = np.array(lags[100:])
-    assert np.all(np.abs(lags) < 0.05), (lags.min(), lags.max())  # stamps are wall time, not seconds since start
-    assert np.median(np.abs(lags)) < 0.01
+    # Stamps are the ROS clock at publication (wall time, not seconds since start): never ahead of the receiver's
+    # clock, and most messages arrive within milliseconds of them. A stall of the receiving process under load
+    # (seen once in CI: 1.02 s) delays a burst of messages, which the share below leaves room for; a stamp from
+    # another clock would be off in every message.
+    assert lags.min() > -0.005, lags.min()
+    assert np.median(lags) < 0.01, np.median(lags)
+    assert np.mean(lags < 0.05) > 0.8, np.percentile(lags, [50, 90, 99])
 
 
 def test_a_best_effort_publisher_drives_the_node(ros, tmp_path):
