@@ -82,3 +82,34 @@ def test_the_fmus_import_path_loads_no_scipy_integrate():
     env = {**os.environ, "PYTHONPATH": f"{ROOT / 'src'}{os.pathsep}{ROOT / 'fmu_build'}"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600, check=True)
     assert out.stdout.strip().splitlines()[-1] == "[]"
+
+
+ISLANDS_RUN = """
+import numba.core.event as ev
+compiled = []
+class Listener(ev.Listener):
+    def on_start(self, event):
+        compiled.append(event.data["dispatcher"].py_func.__qualname__)
+    def on_end(self, event):
+        pass
+ev.register("numba:compile", Listener())
+from grapefmu.bench.scale import scene
+from grapefmu.solver.islands import Islands
+it = Islands(scene("cluster", 10))
+it.run(0.3)
+print(it.formed, sorted(set(compiled)))
+"""
+
+
+def test_a_second_process_runs_islands_without_compiling():
+    """Islands keep their sessions in a numba list that cached compiled functions build and change (session.listed,
+    put, take_last): a typed list's methods called from Python are compiled anew in every process (1.5 to 3 s before
+    each process's first islands run). After a first process has filled numba's cache, a second one compiles
+    nothing (numba's compile events; loading from the cache raises none)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    for _ in range(2):
+        out = subprocess.run([sys.executable, "-c", ISLANDS_RUN], env=env, capture_output=True, text=True,
+                             timeout=900, check=True)
+    formed, compiled = out.stdout.strip().splitlines()[-1].split(" ", 1)
+    assert int(formed) > 3  # islands formed and retired: the list was built and changed
+    assert compiled == "[]", compiled

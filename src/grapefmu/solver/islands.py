@@ -20,7 +20,6 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from numba.typed import List
 
 from ..errors import SolverError
 from ..model.model import Scene
@@ -44,8 +43,8 @@ WINDOW = 0.02
 K = 5
 #: m: berries of different islands join for the next window where a pair's slack (Islands._slack, with the drift
 #: of the last window) is below JOIN; berries of one island part where it is above STAY
-JOIN = 2e-4
-STAY = 1e-3
+JOIN = 5e-4
+STAY = 5e-3
 _COUNTS = ("collision_count", "bruising_impacts", "berries_over_detachment_force")
 _PEAKS = ("peak_contact_force", "peak_pedicel_tension")
 
@@ -123,11 +122,10 @@ class _Batch:
     and their berries and pairs (scene indices) flattened, island k's from offsets[k] and pair_offsets[k]."""
 
     def __init__(self, segs: list[_Segment], n: int):
-        self.segs, self.n = [], n
-        self.sessions = List()
-        for seg in segs:
-            self.segs.append(seg)
-            self.sessions.append(seg.system.session)
+        self.segs, self.n = list(segs), n
+        self.sessions = ses.listed(segs[0].system.session)
+        for k, seg in enumerate(segs[1:], 1):
+            ses.put(self.sessions, k, seg.system.session)
         self._index()
 
     def _index(self) -> None:
@@ -151,17 +149,16 @@ class _Batch:
         slots = sorted(where[id(s)] for s in out)
         for k, seg in zip(slots, new):
             self.segs[k] = seg
-            self.sessions[k] = seg.system.session
+            ses.put(self.sessions, k, seg.system.session)
         for seg in new[len(slots):]:
             self.segs.append(seg)
-            self.sessions.append(seg.system.session)
+            ses.put(self.sessions, len(self.segs) - 1, seg.system.session)
         for k in reversed(slots[len(new):]):  # the last island moves into the free slot
             last = len(self.segs) - 1
             if k != last:
                 self.segs[k] = self.segs[last]
-                self.sessions[k] = self.sessions[last]
             self.segs.pop()
-            self.sessions.pop()
+            ses.take_last(self.sessions, k)
         self._index()
         for k, seg in enumerate(self.segs if saved else ()):
             self.saved[k] = saved[id(seg)]
@@ -170,7 +167,7 @@ class _Batch:
         """Twice the room in island k's recorder."""
         system = self.segs[k].system
         system.grow()
-        self.sessions[k] = system.session
+        ses.put(self.sessions, k, system.session)
 
 
 class Islands:
@@ -309,12 +306,10 @@ class Islands:
         b = self.batch
         ses.previews(b.sessions, t_w - t, b.members, b.offsets, self.lin, self.reach)
         comp = self._components(self._slack(t_w - t), b.label)
-        size = np.bincount(comp)
-        out = []
-        for seg in b.segs:
-            c = comp[seg.members]
-            if not ((c == c[0]).all() and size[c[0]] == len(seg.members)):
-                out.append(seg)
+        c, starts = comp[b.members], b.offsets[:-1]
+        lo, hi = np.minimum.reduceat(c, starts), np.maximum.reduceat(c, starts)
+        kept = (lo == hi) & (np.bincount(comp)[lo] == np.diff(b.offsets))  # the same berries, no more
+        out = [b.segs[k] for k in np.flatnonzero(~kept)]
         if out:
             for seg in out:
                 self._retire(seg)

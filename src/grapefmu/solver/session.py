@@ -10,6 +10,7 @@ from __future__ import annotations
 from numba.core import types
 from numba.experimental import structref
 from numba.extending import overload
+from numba.typed import List
 
 from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from ..physics.compiled import jit
@@ -21,7 +22,8 @@ from ..physics.observe import observe
 from .drift import anchor, predict
 from .loop import DONE, REFUSED, integrate
 
-__all__ = ["Session", "advance", "derivative", "new", "refresh", "previews", "resume", "windows"]
+__all__ = ["Session", "advance", "derivative", "listed", "new", "put", "refresh", "previews", "resume",
+           "take_last", "windows"]
 
 
 @structref.register
@@ -180,3 +182,31 @@ def previews(sessions, span, members, offsets, lin, reach):
         S, Z = s.state, s.buffers
         predict(S.physical.y, S.integrator.f, s.model, span, Z.work, Z.W.berry, lin, reach,
                 members[offsets[k]:offsets[k + 1]])
+
+
+@jit
+def listed(s):
+    """A numba list holding session s, for `windows` and `previews`. The islands' list is built and changed by
+    compiled functions (listed, put, take_last) and never from Python: numba compiles a typed list's methods called
+    from Python anew in every process (1.5 to 3 s on a process's first islands run), but caches these."""
+    out = List()
+    out.append(s)
+    return out
+
+
+@jit
+def put(sessions, k, s):
+    """sessions[k] = s, or s appended where k is the list's length."""
+    if k == len(sessions):
+        sessions.append(s)
+    else:
+        sessions[k] = s
+
+
+@jit
+def take_last(sessions, k):
+    """The last session into slot k, and the list one shorter."""
+    last = len(sessions) - 1
+    if k != last:
+        sessions[k] = sessions[last]
+    sessions.pop()
