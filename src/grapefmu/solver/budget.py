@@ -3,6 +3,7 @@ output interval that are each in range but together would exhaust the machine ar
 instead of failing an hour in (the limit, and the Zeno-guard check, are in grapefmu.scenefile.budget)."""
 from __future__ import annotations
 
+import functools
 import math
 
 from ..errors import SceneError
@@ -16,12 +17,18 @@ SAMPLE_COPIES = 5
 def sample_bytes(model) -> int:
     """Bytes one output sample takes in the recorder (its arrays, so this follows the recorder's layout), and in
     each pair's contact record at it (the run's dense `contacts`, built when asked for)."""
+    return _sample_bytes(model.n_berries, model.n_dof, len(model.couplings), len(model.pairs))
+
+
+@functools.lru_cache(maxsize=256)
+def _sample_bytes(n_berries: int, n_dof: int, n_couplings: int, n_pairs: int) -> int:
+    """sample_bytes by the model's sizes (a recorder is built to measure one: cached, as every run asks)."""
     from ..physics.forces import CONTACT
     from ..physics.layout import layout
     from .state import SAMPLED, recorder
 
-    ny = layout(model.n_berries, model.n_dof, len(model.couplings), turning=True).size  # the larger one
-    return sum(a.nbytes for a in recorder(1, ny, len(model.pairs), 0)[:SAMPLED]) + len(model.pairs) * CONTACT.itemsize
+    ny = layout(n_berries, n_dof, n_couplings, turning=True).size  # the larger one
+    return sum(a.nbytes for a in recorder(1, ny, n_pairs, 0)[:SAMPLED]) + n_pairs * CONTACT.itemsize
 
 
 def check_samples(model, t_end: float, output_interval: float, t_key: str = "solver.t_end",

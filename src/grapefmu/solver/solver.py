@@ -109,7 +109,7 @@ class Solver:
         n = self.model.plane_normal(scene.excitation)
         self._plane_normal = None if n is None else tuple(float(c) for c in n)  # floats: off_axis without numpy
         if skin is None:
-            skin = SKIN_FRACTION * float(np.mean([b.radius for b in self.model.berries]))
+            skin = SKIN_FRACTION * float(self.M.berry["radius"].mean())
         th = scene.thresholds
         self.config = np.zeros(1, dtype=st.CONFIG)
         self.config[0] = (self.rtol, self.atol, self.fixed_step, s.zeno_window,
