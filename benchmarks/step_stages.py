@@ -21,10 +21,6 @@ from grapefmu.solver.solver import Solver
 from grapefmu.solver.step import dense_coefficients, error_norm, rk_step
 
 
-def _args(S, M, X, Z):
-    return (S.physical.contacts, M, X, S.input[0], Z.W, S.broad_phase.near, S.broad_phase.count[0])
-
-
 @nb.njit
 def t_rhs(n, M, X, TB, S, config, Z, h, sampled):
     P, B = S.physical, S.broad_phase
