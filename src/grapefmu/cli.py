@@ -556,6 +556,18 @@ def _on_signal(signum, frame):
     raise Interrupted(signum)
 
 
+def _redeliver(unraisable) -> None:
+    """sys.unraisablehook while a command runs. An Interrupted raised inside a callback from C (llvmlite's object
+    cache, which numba calls while it compiles) is printed as a traceback and dropped there, and the command would
+    run on: raise it again a moment later, back in Python code. Anything else goes to the default hook."""
+    e = unraisable.exc_value
+    if not isinstance(e, Interrupted):
+        sys.__unraisablehook__(unraisable)
+        return
+    signal.signal(signal.SIGALRM, lambda _signum, frame: _on_signal(e.signum, frame))
+    signal.setitimer(signal.ITIMER_REAL, 0.01)
+
+
 def _interrupted_by(e: BaseException) -> bool:
     """Whether e ends the command because of SIGINT or SIGTERM: the Interrupted raised, or what a library made of it."""
     return isinstance(e, KeyboardInterrupt) or bool(_received)
@@ -626,9 +638,11 @@ def main(argv: list[str] | None = None) -> int:
     a.argv = list(sys.argv[1:] if argv is None else argv)  # as typed: a report names the command that made it
     cmd = f"grapefmu {a.command}"
     before = {p: _stamp(p) for p in _targets(a)}
-    handlers = {}
+    handlers, hook = {}, sys.unraisablehook
     if threading.current_thread() is threading.main_thread():
         handlers = {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+        handlers[signal.SIGALRM] = signal.getsignal(signal.SIGALRM)
+        sys.unraisablehook = _redeliver
     _received.clear()
     try:
         try:
@@ -647,6 +661,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{_newline()}{cmd}: {' '.join(text.split())}", file=sys.stderr)
             return code
     finally:
+        if handlers:
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            sys.unraisablehook = hook
         for sig, h in handlers.items():
             if h is not None:
                 signal.signal(sig, h)
