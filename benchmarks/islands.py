@@ -51,8 +51,7 @@ def main() -> None:
                 wall = time.perf_counter() - t
                 if wall < best[w][0]:
                     sizes = [len(s.members) for s in it.segments]
-                    steps = sum(len(s.members) * int(s.final[3]["steps"][0]) for s in it.segments)
-                    best[w] = (wall, compiled[0], steps, it.formed, it.rollbacks, float(np.mean(sizes)))
+                    best[w] = (wall, compiled[0], it.berry_steps, it.formed, it.rollbacks, float(np.mean(sizes)))
         print(f"{n}-berry cluster, 1 s: one step size {1e3 * best['whole']:.1f} ms, {whole.stats['steps'] * n} "
               f"berry-steps")
         for w in a.windows:

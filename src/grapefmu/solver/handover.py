@@ -11,17 +11,66 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics.compiled import jit
+from ..physics.compiled import inline, jit
 from ..physics.layout import model_offsets
 from .solver import restart
 
 
 @jit
-def gather(S, M, X, skin, G, members, dofs, pairs, couplings, scene_offsets, t):
-    """Island state S (model M) at time t from the scene's G: nothing booked yet (totals, counters, the energy the
-    contacts dissipated and the base did: the island's own from now on), its near list and derivative made."""
+def parts(members, inside, pair_i, pair_j, coupled, dof):
+    """An island's pairs, couplings and angles (scene indices, ascending) from its berries; inside: scratch, one
+    flag per scene body, the obstacles' set (they belong to every island)."""
+    n = dof.shape[0] - 1
+    inside[:n] = False
+    n_dofs = 0
+    for m in members:
+        inside[m] = True
+        n_dofs += dof[m + 1] - dof[m]
+    pairs = np.empty(pair_i.shape[0], np.int64)
+    n_pairs = 0
+    for p in range(pair_i.shape[0]):
+        if inside[pair_i[p]] and inside[pair_j[p]]:
+            pairs[n_pairs] = p
+            n_pairs += 1
+    couplings = np.empty(coupled.shape[0], np.int64)
+    n_couplings = 0
+    for c in range(coupled.shape[0]):
+        if inside[coupled[c, 0]] and inside[coupled[c, 1]]:
+            couplings[n_couplings] = c
+            n_couplings += 1
+    dofs = np.empty(n_dofs, np.int64)
+    r = 0
+    for m in members:
+        for a in range(dof[m], dof[m + 1]):
+            dofs[r] = a
+            r += 1
+    return pairs[:n_pairs].copy(), couplings[:n_couplings].copy(), dofs
+
+
+@jit
+def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid_t0, grid_dt, k0):
+    """Island session s over these berries, pairs and couplings of the scene's model P (local: scratch, scene body
+    -> island's, berries first, then the obstacles) at time t, from the scene's G: nothing booked yet (totals,
+    counters, the energy the contacts dissipated and the base did: the island's own from now on), its near list and
+    derivative made, its recorder empty and its first sample k0 of the output grid (grid_t0, grid_dt)."""
+    M, S = s.model, s.state
+    n = P.berry.shape[0]
+    dof = 0
+    for m in range(members.shape[0]):
+        M.berry[m] = P.berry[members[m]]
+        M.berry[m].dof = dof
+        dof += M.berry[m].n_angles
+        local[members[m]] = m
+    for o in range(n, local.shape[0]):
+        local[o] = members.shape[0] + o - n
+    for p in range(pairs.shape[0]):
+        M.pair[p] = P.pair[pairs[p]]
+        M.pair[p].i, M.pair[p].j = local[M.pair[p].i], local[M.pair[p].j]
+    for c in range(couplings.shape[0]):
+        M.coupling[c] = P.coupling[couplings[c]]
+        M.coupling[c].i, M.coupling[c].j = local[M.coupling[c].i], local[M.coupling[c].j]
     y, contacts, book_pair, ring, peak_tension, h, h_contact = G
-    s_bv, s_dh, s_dc, d = scene_offsets
+    s_bv, s_dh, s_dc, d, _, _ = scene_offsets
     o_bv, _, _, _, o_dh, o_dc, o_contact, o_work, _ = model_offsets(M)
     nd = M.n_dof
     Y = S.physical.y
@@ -62,14 +111,21 @@ def gather(S, M, X, skin, G, members, dofs, pairs, couplings, scene_offsets, t):
     clk.break_index = 0
     clk.t_prev = t
     clk.h_last = 0.0
-    restart(S, M, X, skin)
+    restart(S, M, s.excitation, s.config[0].skin)
+    R = s.scratch
+    cur = R.cursor[0]
+    cur.grid_t0, cur.grid_dt, cur.grid_k = grid_t0, grid_dt, k0
+    cur.n_out, cur.n_impacts, cur.n_changes = 0, 0, 0
+    for p in range(pairs.shape[0]):
+        R.logged[p] = S.physical.contacts[p]
 
 
 @jit
-def scatter(S, M, G, members, dofs, pairs, couplings, scene_offsets):
-    """What island state S (model M) carries back into the scene's G (not its own totals: the caller keeps those)."""
+def scatter(s, G, members, dofs, pairs, couplings, scene_offsets):
+    """What island session s's state carries back into the scene's G (not its own totals: the caller keeps those)."""
+    S, M = s.state, s.model
     y, contacts, book_pair, ring, peak_tension, h, h_contact = G
-    s_bv, s_dh, s_dc, d = scene_offsets
+    s_bv, s_dh, s_dc, d, _, _ = scene_offsets
     o_bv, _, _, _, o_dh, o_dc, _, _, _ = model_offsets(M)
     nd = M.n_dof
     Y = S.physical.y
@@ -90,3 +146,47 @@ def scatter(S, M, G, members, dofs, pairs, couplings, scene_offsets):
         contacts[pairs[p]] = S.physical.contacts[p]
         book_pair[pairs[p]] = S.book.pair[p]
         ring[pairs[p], :] = S.book.ring[p, :]
+
+
+@jit
+def retire(s, G, members, dofs, pairs, couplings, scene_offsets, k0, y, accel, totals, later, ledger_later):
+    """Island session s's state back into the scene's G (scatter), and what its recorder holds into the run's
+    arrays from sample k0 on: y (the scene's layout) and accel, and totals, to which it adds its counts and
+    energy integrals and where it raises the peaks. What it closed with holds for every later sample: its totals
+    go into `later` and its energy integrals (contacts, work) into `ledger_later`, at the sample after its last
+    (the run sums and raises them over the samples after, Islands._assemble)."""
+    scatter(s, G, members, dofs, pairs, couplings, scene_offsets)
+    S, M, R = s.state, s.model, s.scratch
+    s_bv, s_dh, s_dc, d, s_contact, s_work = scene_offsets
+    o_bv, _, _, _, o_dh, o_dc, o_contact, o_work, _ = model_offsets(M)
+    nd = M.n_dof
+    r = R.cursor[0].n_out
+    for k in range(r):
+        row, Y = k0 + k, R.y[k]
+        for a in range(dofs.shape[0]):
+            y[row, dofs[a]] = Y[a]
+            y[row, d + dofs[a]] = Y[nd + a]
+        for b in range(o_dh - o_bv):
+            y[row, s_bv + b] = Y[o_bv + b]
+        for m in range(members.shape[0]):
+            y[row, s_dh + members[m]] = Y[o_dh + m]
+        for c in range(couplings.shape[0]):
+            y[row, s_dc + couplings[c]] = Y[o_dc + c]
+        y[row, s_contact] += Y[o_contact]
+        y[row, s_work] += Y[o_work]
+        accel[row, :] = R.accel[k, :]
+        _add(totals[row], R.totals[k])
+    _add(later[k0 + r], S.book.totals[0])
+    Y = S.physical.y
+    ledger_later[k0 + r, 0] += Y[o_contact]
+    ledger_later[k0 + r, 1] += Y[o_work]
+
+
+@inline
+def _add(a, b):
+    """Totals b into a: counts added, peaks raised."""
+    a.collision_count += b.collision_count
+    a.bruising_impacts += b.bruising_impacts
+    a.berries_over_detachment_force += b.berries_over_detachment_force
+    a.peak_contact_force = max(a.peak_contact_force, b.peak_contact_force)
+    a.peak_pedicel_tension = max(a.peak_pedicel_tension, b.peak_pedicel_tension)

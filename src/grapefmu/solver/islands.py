@@ -33,7 +33,7 @@ from . import session as ses
 from . import state as st
 from .loop import IMPACTS_FULL, OUT_FULL, buffers
 from .drift import components, slack
-from .handover import gather, scatter
+from .handover import form, parts, retire
 from .solver import STATUS_TEXT, Solver, blank_state, open_impacts, run_stats
 
 #: the default window, s: long enough that a window's calls cost little against its steps, short enough that
@@ -45,6 +45,9 @@ K = 5
 #: of the last window) is below JOIN; berries of one island part where it is above STAY
 JOIN = 5e-4
 STAY = 5e-3
+#: samples an island's recorder holds at first: the rest of the run up to this many (rows not written are never
+#: touched, so room costs address space only; growing a recorder costs a new session)
+ROWS = 4096
 _COUNTS = ("collision_count", "bruising_impacts", "berries_over_detachment_force")
 _PEAKS = ("peak_contact_force", "peak_pedicel_tension")
 
@@ -62,27 +65,15 @@ class _System:
         self.M = M._replace(berry=berry, pair=M.pair[pairs], coupling=M.coupling[couplings],
                             n_dof=int(berry["n_angles"].sum()))
         self.layout = lay = layout(len(members), self.M.n_dof, len(couplings), M.turning)
-        blank = blank_state(lay, parent.tableau, self.M, parent.config, parent.state.book.ring.shape[1], 0.0,
-                            int(parent.state.fingerprint[0]), np.zeros(lay.size))
-        self.memory, self.state = st.pack(blank)
+        self.memory, self.state = blank_state(lay, parent.tableau, self.M, parent.config,
+                                              parent.state.book.ring.shape[1], 0.0, int(parent.state.fingerprint[0]),
+                                              np.zeros(lay.size))
         self.backup = np.zeros_like(self.memory)
         self.buffers = buffers(self.M, lay.size, True)
         self.now = (obs.empty(1, lay.n, lay.d, len(pairs)), np.zeros((1, 6)), np.zeros((1, len(pairs)), bool))
         self.parent = parent
         self.rec = st.recorder(rows, lay.size, len(pairs), max(len(pairs), 1) * 64)
         self.session = self._session()
-
-    def load(self, members: np.ndarray, pairs: np.ndarray, couplings: np.ndarray, local: np.ndarray) -> None:
-        """These berries, pairs and couplings (the system's shape) into the model; local maps scene bodies to the
-        island's (berries first, then the obstacles)."""
-        M, P = self.M, self.parent.M
-        M.berry[:] = P.berry[members]
-        n_angles = M.berry["n_angles"]
-        M.berry["dof"] = np.cumsum(n_angles) - n_angles
-        M.pair[:] = P.pair[pairs]
-        M.coupling[:] = P.coupling[couplings]
-        for a in (M.pair, M.coupling):
-            a["i"], a["j"] = local[a["i"]], local[a["j"]]
 
     def _session(self) -> ses.Session:
         p = self.parent
@@ -104,17 +95,17 @@ class _System:
 
 class _Segment:
     """One island over the windows it lived through: its berries, pairs and couplings (scene indices), its system,
-    and from output sample k0 on what it recorded (copied out of the system's recorder when it retires)."""
+    from output sample k0 on, and what it recorded that the run assembles last (its impacts and contact changes;
+    its samples go into the run's arrays when it retires)."""
 
-    __slots__ = ("members", "pairs", "couplings", "dofs", "system", "k0", "impacts", "window", "rows", "changes",
-                 "final")
+    __slots__ = ("members", "pairs", "couplings", "dofs", "system", "k0", "impacts", "window", "changes")
 
     def __init__(self, members, pairs, couplings, dofs, system, k0):
         self.members, self.pairs, self.couplings, self.dofs = members, pairs, couplings, dofs
         self.system, self.k0 = system, k0
         self.impacts: list[np.ndarray] = []   # finished impacts of the windows kept
         self.window: list[np.ndarray] = []    # ... of the window in progress
-        self.rows = self.changes = self.final = None  # when it retired: samples, contact changes, closing values
+        self.changes = None                   # when it retired: its contact changes
 
 
 class _Batch:
@@ -199,35 +190,38 @@ class Islands:
         self.local = np.zeros(self.n + len(m.obstacles), dtype=np.int64)  # scratch: scene body -> island's
 
     # --- the state between islands (scene indices) ----------------------------------------------------------
-    def dofs_of(self, members: np.ndarray) -> np.ndarray:
-        """The angles of these berries (scene indices)."""
-        dof = self.dof
-        n = dof[members + 1] - dof[members]
-        return np.repeat(dof[members] - (np.cumsum(n) - n), n) + np.arange(n.sum())
-
     def _start(self) -> None:
-        """The scene's state between islands, and what the run's first sample holds, from the start Solver(scene)
+        """The scene's state between islands and the run's arrays, their first sample from the start Solver(scene)
         made; nothing formed or rolled back yet."""
         S = self.whole.state
         self.G = (S.physical.y.copy(), S.physical.contacts.copy(), S.book.pair.copy(), S.book.ring.copy(),
                   S.book.peak_tension.copy(), np.zeros(self.n), np.zeros(self.n))
-        self.start = (S.physical.y.copy(), S.book.totals.copy(), S.physical.contacts.copy(), self.whole.base_accel)
-        lay = self.layout
-        self.scene_offsets = np.array([lay.base_velocity.start, lay.d_hinge.start, lay.d_coupling.start, lay.d])
+        self.contacts0 = S.physical.contacts.copy()
+        lay, n = self.layout, self.n_samples
+        self.scene_offsets = np.array([lay.base_velocity.start, lay.d_hinge.start, lay.d_coupling.start, lay.d,
+                                       lay.d_contact, lay.work])
+        self.y, self.accel = np.zeros((n, lay.size)), np.zeros((n, 6))
+        self.y[0], self.accel[0] = S.physical.y, self.whole.base_accel
+        self.totals = np.repeat(S.book.totals, n)  # the pairs that start in contact count from the start (Solver's)
+        self.later = np.zeros(n + 1, dtype=TOTALS)
+        for f in _PEAKS:
+            self.later[f] = -np.inf
+        self.ledger_later = np.zeros((n + 1, 2))
+        self.counters = np.zeros(len(st.BOOK_COUNTERS.names), dtype=np.int64)
         self.segments: list[_Segment] = []
-        self.formed = self.rollbacks = 0
+        self.formed = self.rollbacks = self.berry_steps = 0
 
     def _retire(self, seg: _Segment) -> None:
-        """Put a segment's state into the scene's, copy out its record and free its system."""
+        """Put a segment's state into the scene's and its samples into the run's arrays, keep its contact changes
+        and free its system."""
         system = seg.system
-        S, sl = system.state, system.layout
-        scatter(S, system.M, self.G, seg.members, seg.dofs, seg.pairs, seg.couplings, self.scene_offsets)
-        y = S.physical.y
-        seg.final = (float(y[sl.d_contact]), float(y[sl.work]), S.book.totals.copy(), S.book.counters.copy())
+        retire(system.session, self.G, seg.members, seg.dofs, seg.pairs, seg.couplings, self.scene_offsets, seg.k0,
+               self.y, self.accel, self.totals, self.later, self.ledger_later)
+        done = system.state.book.counters.view(np.int64)
+        self.counters += done
+        self.berry_steps += len(seg.members) * int(done[0])  # steps come first in BOOK_COUNTERS
         rec = system.rec
-        n, nc = int(rec.cursor["n_out"][0]), int(rec.cursor["n_changes"][0])
-        seg.rows = tuple(a[:n].copy() for a in rec[:st.SAMPLED])
-        seg.changes = rec.changes[:nc].copy()
+        seg.changes = rec.changes[:int(rec.cursor["n_changes"][0])].copy()
         seg.impacts += seg.window
         seg.window = []
         self.segments.append(seg)
@@ -235,26 +229,14 @@ class Islands:
 
     def _form(self, members: np.ndarray, t: float, k0: int) -> _Segment:
         """An island of these berries (ascending) at time t, from the scene's state, recording from sample k0."""
-        inside = self.inside
-        inside[:self.n] = False
-        inside[members] = True
-        pairs = np.flatnonzero(inside[self.pair_owner] & inside[self.pair_other])
-        couplings = np.flatnonzero(inside[self.coupled[:, 0]] & inside[self.coupled[:, 1]])
-        dofs = self.dofs_of(members)
-        local = self.local
-        local[members] = np.arange(len(members))
-        local[self.n:] = len(members) + np.arange(len(local) - self.n)  # obstacles follow the berries
+        pairs, couplings, dofs = parts(members, self.inside, self.pair_owner, self.pair_other, self.coupled, self.dof)
         shape = (len(members), len(dofs), len(couplings), len(pairs))
         pool = self.free.get(shape)
-        system = pool.pop() if pool else _System(self.whole, members, pairs, couplings, min(self.n_samples, 256))
-        system.load(members, pairs, couplings, local)
+        rows = min(self.n_samples - k0 + 1, ROWS)
+        system = pool.pop() if pool else _System(self.whole, members, pairs, couplings, rows)
         w = self.whole
-        gather(system.state, system.M, w.excitation, w.config["skin"][0], self.G, members, dofs, pairs, couplings,
-               self.scene_offsets, t)
-        cur = system.rec.cursor
-        cur["grid_t0"], cur["grid_dt"], cur["grid_k"] = self.t0, self.dt, k0
-        cur["n_out"] = cur["n_impacts"] = cur["n_changes"] = 0
-        system.rec.logged[:] = system.state.physical.contacts
+        form(system.session, w.M, self.G, members, dofs, pairs, couplings, self.local, self.scene_offsets, t, self.t0,
+             self.dt, k0)
         self.formed += 1
         return _Segment(members, pairs, couplings, dofs, system, k0)
 
@@ -385,45 +367,20 @@ class Islands:
         return self._assemble(t_end, time.perf_counter() - wall_start)
 
     def _assemble(self, t_end: float, wall: float) -> Run:
-        """One Run of the scene from the segments (as a Solver of the whole scene would record it)."""
+        """One Run of the scene from the run's arrays and the segments (as a Solver of the whole scene would record
+        it)."""
         lay, n = self.layout, self.n_samples
         t = self.t0 + np.arange(n) * self.dt
         t[-1] = min(t[-1], t_end)
-        y = np.zeros((n, lay.size))
-        accel = np.zeros((n, 6))
-        totals = np.zeros(n, dtype=TOTALS)
-        totals["peak_pedicel_tension"] = -np.inf
-        y[0], totals0, contacts0, accel[0] = self.start
-        for f in (*_COUNTS, *_PEAKS):  # the pairs that start in contact are counted at the start (Solver's _start)
-            totals[f] = totals0[f][0]
-        counters = np.zeros(1, dtype=st.BOOK_COUNTERS)
+        y, totals, later = self.y, self.totals, self.later[:n]
+        y[:, [lay.d_contact, lay.work]] += np.cumsum(self.ledger_later[:n], axis=0)
+        for f in _COUNTS:
+            totals[f] += np.cumsum(later[f])
+        for f in _PEAKS:
+            np.maximum(totals[f], np.maximum.accumulate(later[f]), out=totals[f])
         finished, changes = [], []
         for seg in self.segments:
-            sl = seg.system.layout
-            ts_, ys, accels, ts = seg.rows
-            r = len(ts_)
-            rows = slice(seg.k0, seg.k0 + r)
-            after = slice(seg.k0 + r, n)
-            y[rows, lay.q.start + seg.dofs] = ys[:, sl.q]
-            y[rows, lay.w.start + seg.dofs] = ys[:, sl.w]
-            y[rows, lay.d_hinge.start + seg.members] = ys[:, sl.d_hinge]
-            y[rows, lay.d_coupling.start + seg.couplings] = ys[:, sl.d_coupling]
-            y[rows, lay.base_velocity.start:lay.d_hinge.start] = ys[:, sl.base_velocity.start:sl.d_hinge.start]
-            d_contact, work, tot, done = seg.final
-            y[rows, lay.d_contact] += ys[:, sl.d_contact]
-            y[after, lay.d_contact] += d_contact
-            y[rows, lay.work] += ys[:, sl.work]
-            y[after, lay.work] += work
-            accel[rows] = accels
-            for f in _COUNTS:
-                totals[f][rows] += ts[f]
-                totals[f][after] += tot[f][0]
-            for f in _PEAKS:
-                totals[f][rows] = np.maximum(totals[f][rows], ts[f])
-                totals[f][after] = np.maximum(totals[f][after], tot[f][0])
-            for f in st.BOOK_COUNTERS.names:
-                counters[f] += done[f]
-            ch = seg.changes.copy()
+            ch = seg.changes
             ch["sample"] += seg.k0
             ch["pair"] = seg.pairs[ch["pair"]]
             changes.append(ch)
@@ -433,14 +390,13 @@ class Islands:
                 finished.append(rec)
         ongoing = open_impacts(self.G[1], self.G[2], t[-1])
         changes = concat(changes) if changes else np.zeros(0, dtype=st.CHANGE)
-        log = ContactLog(contacts0, changes[np.argsort(changes["sample"], kind="stable")])
+        log = ContactLog(self.contacts0, changes[np.argsort(changes["sample"], kind="stable")])
         impacts = concat(finished) if finished else np.zeros(0, dtype=IMPACT)
         impacts = impacts[np.argsort(impacts["end"], kind="stable")]
+        counters = self.counters.view(st.BOOK_COUNTERS)
         stats = run_stats(counters, totals[-1:], lay, len(self.scene.model.pairs))
         stats |= {"wall_time": wall, "method": "event", "t_start": self.t0, "rtol": self.whole.rtol,
                   "atol": self.whole.atol, "fixed_step": self.whole.fixed_step, "islands_formed": self.formed,
                   "island_rollbacks": self.rollbacks, "window": self.window}
-        return Run(self.scene, t, y, log, accel, totals, Impacts.from_records(impacts, ongoing),
+        return Run(self.scene, t, y, log, self.accel, totals, Impacts.from_records(impacts, ongoing),
                    self.G[2]["peak_force"].copy(), self.G[4].copy(), stats)
-
-

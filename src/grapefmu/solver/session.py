@@ -3,7 +3,7 @@
 Calling a compiled function costs numba about 0.2 µs per array it unboxes; the model, excitation,
 tableau, state and scratch recorder are about forty arrays. A `Session` (a numba StructRef) holds them
 all once, and `advance` takes it as a single argument. The state's arrays are views on one byte buffer
-(state.pack), so saving it before a step and restoring it after a failure are one copy each.
+(state.zeros), so saving it before a step and restoring it after a failure are one copy each.
 """
 from __future__ import annotations
 

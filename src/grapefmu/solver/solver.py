@@ -117,8 +117,8 @@ class Solver:
                           s.contact_location == "step-control" and self.method == "event", th.bruise_force,
                           th.bruise_energy, th.detachment_force)
         self._closed: list[np.ndarray] = []
-        fresh = self._fresh_state(s.zeno_max_events, float(t_start))
-        self._memory, self.state = st.pack(fresh)  # the state's arrays live in _memory from now on
+        self._memory, self.state = self._fresh_state(s.zeno_max_events, float(t_start))  # the state's arrays
+        # live in _memory from now on
         self._backup = np.zeros_like(self._memory)
         self._scratch = st.recorder(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
         m, lay, y = self.model, self.layout, self.state.physical.y
@@ -133,11 +133,11 @@ class Solver:
                                             self.state.book.totals, observation, m.obstacle_pairs)
 
     # --- state -----------------------------------------------------------------------------------
-    def _fresh_state(self, zeno_max: int, t_start: float) -> st.SolverState:
-        S = blank_state(self.layout, self.tableau, self.M, self.config, zeno_max, t_start, self._fingerprint(),
-                        initial(self.layout, self.scene))
+    def _fresh_state(self, zeno_max: int, t_start: float) -> tuple[np.ndarray, st.SolverState]:
+        memory, S = blank_state(self.layout, self.tableau, self.M, self.config, zeno_max, t_start,
+                                self._fingerprint(), initial(self.layout, self.scene))
         _start(S, self.M, self.excitation, self.config["skin"][0])
-        return S
+        return memory, S
 
     def _fingerprint(self) -> int:
         """The model, method and settings a state belongs to, as one number."""
@@ -399,25 +399,20 @@ class Solver:
 
 
 def blank_state(lay, tableau: Tableau, M, config: np.ndarray, zeno_max: int, t: float, fingerprint: int,
-                y: np.ndarray) -> st.SolverState:
-    """A state at time t with y, every pair apart and nothing booked (modes, near list and derivative unset)."""
-    ny, npair, n = lay.size, M.pair.shape[0], lay.n
-    totals = np.zeros(1, dtype=st.TOTALS)
-    totals["peak_pedicel_tension"] = -np.inf
-    contacts = np.zeros(npair, dtype=st.CONTACT)
-    contacts["v_onset"] = HC_MIN_APPROACH_SPEED
-    S = st.SolverState(
-        physical=st.Physical(np.array([t]), y, contacts),
-        input=np.zeros(1, dtype=INPUT),
-        integrator=st.Integrator(np.zeros(ny), y.copy(), np.zeros((tableau.p.shape[0], ny)),
-                                 np.zeros((ny, tableau.p.shape[1])), np.zeros(1, dtype=st.CLOCK)),
-        book=st.Book(np.zeros(1, dtype=st.BOOK_COUNTERS), totals, np.zeros(npair, dtype=st.BOOK_PAIR),
-                     np.full(n, -np.inf), np.full((npair, zeno_max), -np.inf)),
-        broad_phase=st.BroadPhase(np.zeros(npair, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros((n, 6))),
-        fingerprint=np.array([fingerprint], dtype=np.uint64))
+                y: np.ndarray) -> tuple[np.ndarray, st.SolverState]:
+    """A state at time t with y, every pair apart and nothing booked (modes, near list and derivative unset), as
+    views on one buffer (state.zeros; returned first)."""
+    memory, S = st.zeros(lay.size, M.pair.shape[0], lay.n, tableau.p.shape[0], tableau.p.shape[1], zeno_max)
+    S.physical.t[0] = t
+    S.physical.y[:] = S.integrator.y_prev[:] = y
+    S.physical.contacts["v_onset"] = HC_MIN_APPROACH_SPEED
+    S.book.totals["peak_pedicel_tension"] = -np.inf
+    S.book.peak_tension[:] = -np.inf
+    S.book.ring[:] = -np.inf
+    S.fingerprint[0] = fingerprint
     if config["step_control"][0]:
         S.book.pair["smooth_until"][M.pair["law"] != Law.KELVIN_VOIGT] = np.inf  # no force jump at onset
-    return S
+    return memory, S
 
 
 def open_impacts(contacts: np.ndarray, book_pair: np.ndarray, t: float) -> np.ndarray:

@@ -6,6 +6,8 @@ write in place); per-pair and per-berry quantities are named arrays.
 """
 from __future__ import annotations
 
+import functools
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -17,8 +19,8 @@ from ..results.contacts import CHANGE
 from ..results.records import IMPACT, TOTALS
 
 __all__ = ["BOOK_COUNTERS", "BOOK_PAIR", "CONFIG", "CONTACT", "IMPACT", "INPUT", "TOTALS", "Book", "BroadPhase",
-           "Integrator", "Physical", "Recorder", "SolverState", "assign", "copy", "flatten", "pack", "recorder",
-           "unflatten"]
+           "Integrator", "Physical", "Recorder", "SolverState", "assign", "copy", "flatten", "recorder", "unflatten",
+           "zeros"]
 
 #: the solver's settings as the compiled core reads them
 CONFIG = np.dtype([("rtol", "f8"), ("atol", "f8"), ("fixed_step", "f8"), ("zeno_window", "f8"), ("locate", "?"),
@@ -164,23 +166,31 @@ def copy(state: SolverState) -> SolverState:
         BroadPhase(B.near.copy(), B.count.copy(), B.reference.copy()), state.fingerprint.copy())
 
 
-def pack(state: SolverState) -> tuple[np.ndarray, SolverState]:
-    """The state copied into one byte buffer, and the state as views on it (each array 16-byte aligned):
-    saving the state before a step and restoring it after a failure are then one copy of the buffer."""
-    leaves = flatten(state)
-    offsets, size = [], 0
-    for a in leaves.values():
-        size = -(-size // 16) * 16
-        offsets.append(size)
-        size += a.nbytes
-    memory = np.zeros(size // 8 + 2, np.uint64)  # in words, so that a copy moves 8 bytes at a time; + 2: an
-    # empty array may sit at the very end
-    raw = memory.view(np.uint8)
-    views = {}
-    for (name, a), at in zip(leaves.items(), offsets):
-        raw[at:at + a.nbytes] = np.ascontiguousarray(a).reshape(-1).view(np.uint8)  # bytes: records field by field
-        views[name] = np.ndarray(a.shape, a.dtype, buffer=memory, offset=at)      # are ten times slower
-    return memory, unflatten(views)
+@functools.lru_cache(maxsize=256)
+def _plan(ny: int, npair: int, n: int, stages: int, k: int, zeno_max: int):
+    """Each array of a state of these sizes as (shape, dtype, byte offset) in flatten's order, each 16-byte aligned,
+    and the buffer's size in 8-byte words (+ 2: an empty array may sit at the very end)."""
+    shapes = ((1,), (ny,), (npair,), (1,), (ny,), (ny,), (stages, ny), (ny, k), (1,), (1,), (1,), (npair,), (n,),
+              (npair, zeno_max), (npair,), (1,), (n, 6), (1,))
+    dtypes = (np.float64, np.float64, CONTACT, INPUT, np.float64, np.float64, np.float64, np.float64, CLOCK,
+              BOOK_COUNTERS, TOTALS, BOOK_PAIR, np.float64, np.float64, np.int64, np.int64, np.float64, np.uint64)
+    plan, at = [], 0
+    for shape, dtype in zip(shapes, map(np.dtype, dtypes)):
+        at = -(-at // 16) * 16
+        plan.append((shape, dtype, at))
+        at += math.prod(shape) * dtype.itemsize
+    return tuple(plan), at // 8 + 2
+
+
+def zeros(ny: int, npair: int, n: int, stages: int, k: int, zeno_max: int) -> tuple[np.ndarray, SolverState]:
+    """A state of zeros for ny state variables, npair pairs, n berries, a method of `stages` stages and k dense
+    coefficients, as views on one buffer of 8-byte words (returned first): saving the state before a step and
+    restoring it after a failure are then one copy of the buffer."""
+    plan, words = _plan(ny, npair, n, stages, k, zeno_max)
+    memory = np.zeros(words, np.uint64)
+    a = [np.ndarray(shape, dtype, buffer=memory, offset=at) for shape, dtype, at in plan]
+    return memory, SolverState(Physical(*a[0:3]), a[3], Integrator(*a[4:9]), Book(*a[9:14]), BroadPhase(*a[14:17]),
+                               a[17])
 
 
 def _bytes(a: np.ndarray) -> np.ndarray:
