@@ -4,7 +4,8 @@ addresses. numba keeps a function's object code in memory only when it compiles 
 compiles into an empty cache directory first (a few minutes); functions inlined into their callers count as the
 caller. What perf still cannot name is numba's runtime (reference counts: a few hex addresses close together).
 Needs `perf` (linux-tools) and permission to attach (perf_event_paranoid ≤ 1, or root).
-Run: .venv/bin/python benchmarks/perf_compiled.py [collision | cluster N] [--seconds 8] [--rtol 1e-6]"""
+`islands N` runs the cluster of N berries in multirate islands (Islands(scene).run()).
+Run: .venv/bin/python benchmarks/perf_compiled.py [collision | cluster N | islands N] [--seconds 8] [--rtol 1e-6]"""
 from __future__ import annotations
 
 import argparse
@@ -24,14 +25,20 @@ import grapefmu
 from numba.core.registry import CPUDispatcher
 from grapefmu.bench.scale import scene as scale_scene
 from grapefmu.bench.scenes import bench_scenes, build
+from grapefmu.solver.islands import Islands
 from grapefmu.solver.solver import Solver
-which, rtol, seconds, ready = sys.argv[1], float(sys.argv[2]), float(sys.argv[3]), sys.argv[4]
-sc = build(bench_scenes()["paper collision"]) if which == "collision" else scale_scene("cluster", int(which))
+which, n, rtol, seconds, ready = sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4]), sys.argv[5]
+sc = build(bench_scenes()["paper collision"]) if which == "collision" else scale_scene("cluster", int(n))
 kw = dict(rtol=rtol, atol=rtol / 100)
-grapefmu.simulate(sc, output_interval=1e-3, **kw)  # compiles everything a run uses
+run = (lambda: Islands(sc, **kw).run(output_interval=1e-3)) if which == "islands" else (
+    lambda: Solver(sc, **kw).run(output_interval=1e-3))
+run()  # compiles everything a run uses
 names = {}
 for obj in gc.get_objects():
-    if not isinstance(obj, CPUDispatcher):
+    try:
+        if not isinstance(obj, CPUDispatcher):
+            continue
+    except ReferenceError:  # a weak proxy whose object is gone
         continue
     for cres in obj.overloads.values():
         lib = cres.library
@@ -64,7 +71,7 @@ with open(f"/tmp/perf-{os.getpid()}.map", "w") as fh:
 open(ready, "w").write(str(os.getpid()))
 t0, runs = time.perf_counter(), 0
 while time.perf_counter() - t0 < seconds:
-    Solver(sc, **kw).run(output_interval=1e-3)
+    run()
     runs += 1
 print(f"{runs} runs, {(time.perf_counter() - t0) / runs * 1e3:.3f} ms each (under perf)")
 '''
@@ -77,13 +84,13 @@ def main() -> None:
     ap.add_argument("--rtol", type=float, default=1e-6)
     ap.add_argument("--top", type=int, default=30)
     a = ap.parse_args()
-    which = a.scene[1] if a.scene[0] == "cluster" else "collision"
+    which, n = (a.scene[0], a.scene[1]) if a.scene[0] in ("cluster", "islands") else ("collision", "0")
     if not shutil.which("perf"):
         sys.exit("perf_compiled: `perf` is not installed (linux-tools)")
     work = Path(tempfile.mkdtemp(prefix="grapefmu-perf-"))
     ready, data = work / "ready", work / "perf.data"
     env = {**os.environ, "NUMBA_CACHE_DIR": str(work / "numba"), "PYTHONPATH": str(ROOT / "src")}
-    child = subprocess.Popen([sys.executable, "-c", CHILD, which, str(a.rtol), str(a.seconds + 2), str(ready)],
+    child = subprocess.Popen([sys.executable, "-c", CHILD, which, n, str(a.rtol), str(a.seconds + 2), str(ready)],
                              env=env)
     print("compiling into an empty cache (a few minutes) ...", flush=True)
     while not ready.exists():

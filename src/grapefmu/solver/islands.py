@@ -23,7 +23,6 @@ import numpy as np
 
 from ..errors import SolverError
 from ..model.model import Scene
-from ..physics import observe as obs
 from ..physics.layout import layout, layout_of
 from ..results.contacts import ContactLog
 from ..results.impacts import Impacts
@@ -31,7 +30,7 @@ from ..results.records import IMPACT, TOTALS, concat
 from ..results.run import Run
 from . import session as ses
 from . import state as st
-from .loop import IMPACTS_FULL, OUT_FULL, buffers
+from .loop import IMPACTS_FULL, OUT_FULL
 from .drift import components, slack
 from .handover import form, parts, retire
 from .solver import STATUS_TEXT, Solver, blank_state, open_impacts, run_stats
@@ -54,31 +53,26 @@ _PEAKS = ("peak_contact_force", "peak_pedicel_tension")
 
 class _System:
     """An island's compiled side: its model (the scene's arrays for its berries, pairs and couplings, renumbered),
-    state in one buffer with its backup, buffers, recorder and session. Built once per shape (berries, angles, pairs,
-    couplings) and loaded with another island's berries in place, so that forming an island builds nothing."""
+    state in one buffer with its backup, recorder and session (session.island). Built once per shape (berries,
+    angles, couplings, pairs) and loaded with another island's berries in place (handover.form)."""
 
-    __slots__ = ("M", "layout", "state", "memory", "backup", "buffers", "now", "parent", "rec", "session")
+    __slots__ = ("M", "layout", "state", "memory", "backup", "parent", "rec", "session")
 
-    def __init__(self, parent: Solver, members: np.ndarray, pairs: np.ndarray, couplings: np.ndarray, rows: int):
+    def __init__(self, parent: Solver, members: np.ndarray, pairs: np.ndarray, couplings: np.ndarray, n_dof: int,
+                 rows: int):
         M = parent.M
-        berry = M.berry[members]
-        self.M = M._replace(berry=berry, pair=M.pair[pairs], coupling=M.coupling[couplings],
-                            n_dof=int(berry["n_angles"].sum()))
-        self.layout = lay = layout(len(members), self.M.n_dof, len(couplings), M.turning)
+        self.M = M._replace(berry=M.berry[members], pair=M.pair[pairs], coupling=M.coupling[couplings], n_dof=n_dof)
+        self.layout = lay = layout(len(members), n_dof, len(couplings), M.turning)
         self.memory, self.state = blank_state(lay, parent.tableau, self.M, parent.config,
                                               parent.state.book.ring.shape[1], 0.0, int(parent.state.fingerprint[0]),
                                               np.zeros(lay.size))
         self.backup = np.zeros_like(self.memory)
-        self.buffers = buffers(self.M, lay.size, True)
-        self.now = (obs.empty(1, lay.n, lay.d, len(pairs)), np.zeros((1, 6)), np.zeros((1, len(pairs)), bool))
         self.parent = parent
         self.rec = st.recorder(rows, lay.size, len(pairs), max(len(pairs), 1) * 64)
         self.session = self._session()
 
     def _session(self) -> ses.Session:
-        p = self.parent
-        return ses.new(self.M, p.excitation, p.tableau, p.config, self.state, self.rec, self.buffers, self.memory,
-                       self.backup, self.now)
+        return ses.island(self.parent._session, self.M, self.state, self.rec, self.memory, self.backup)
 
     def grow(self) -> None:
         """Twice the room in the recorder (samples and contact changes)."""
@@ -91,7 +85,6 @@ class _System:
             a[:n] = b[:n]
         self.rec.changes[:nc] = old.changes[:nc]
         self.session = self._session()
-
 
 class _Segment:
     """One island over the windows it lived through: its berries, pairs and couplings (scene indices), its system,
@@ -121,15 +114,18 @@ class _Batch:
 
     def _index(self) -> None:
         segs = self.segs
+        sizes = np.array([len(s.members) for s in segs], dtype=np.int64)
         self.members = np.concatenate([s.members for s in segs])
-        self.offsets = np.r_[0, np.cumsum([len(s.members) for s in segs])].astype(np.int64)
-        self.pairs = np.concatenate([s.pairs for s in segs]).astype(np.int64)
-        self.pair_offsets = np.r_[0, np.cumsum([len(s.pairs) for s in segs])].astype(np.int64)
+        self.offsets = np.zeros(len(segs) + 1, dtype=np.int64)
+        np.cumsum(sizes, out=self.offsets[1:])
+        self.pairs = np.concatenate([s.pairs for s in segs])
+        self.pair_offsets = np.zeros(len(segs) + 1, dtype=np.int64)
+        np.cumsum([len(s.pairs) for s in segs], out=self.pair_offsets[1:])
         self.saved = np.zeros(len(segs), dtype=st.CURSOR)
         self.status = np.zeros(len(segs), dtype=np.int64)
         self.n_impacts = np.zeros(len(segs), dtype=np.int64)
         self.label = np.empty(self.n, dtype=np.int64)
-        self.label[self.members] = np.repeat(np.arange(len(segs)), np.diff(self.offsets))
+        self.label[self.members] = np.repeat(np.arange(len(segs)), sizes)
 
     def replace(self, out: list[_Segment], new: list[_Segment], ran: _Batch | None = None) -> None:
         """Islands out leave, islands new come (the sessions list changed in place: rebuilding it costs more). Within
@@ -233,7 +229,7 @@ class Islands:
         shape = (len(members), len(dofs), len(couplings), len(pairs))
         pool = self.free.get(shape)
         rows = min(self.n_samples - k0 + 1, ROWS)
-        system = pool.pop() if pool else _System(self.whole, members, pairs, couplings, rows)
+        system = pool.pop() if pool else _System(self.whole, members, pairs, couplings, len(dofs), rows)
         w = self.whole
         form(system.session, w.M, self.G, members, dofs, pairs, couplings, self.local, self.scene_offsets, t, self.t0,
              self.dt, k0)

@@ -20,9 +20,9 @@ from ..physics.layout import model_offsets
 from ..physics.kinematics import workspace
 from ..physics.observe import observe
 from .drift import anchor, predict
-from .loop import DONE, REFUSED, integrate
+from .loop import DONE, REFUSED, buffers, integrate
 
-__all__ = ["Session", "advance", "derivative", "listed", "new", "put", "refresh", "previews", "resume",
+__all__ = ["Session", "advance", "derivative", "island", "listed", "new", "put", "refresh", "previews", "resume",
            "take_last", "windows"]
 
 
@@ -65,6 +65,15 @@ def new(model, excitation, tableau, config, state, scratch, buffers, memory, bac
     is the loop's loop.Buffers; `now` is (Observation, accel (1, 6), in_contact (1, P)) of one sample: what
     `refresh` fills."""
     return _new(model, excitation, tableau, config, state, scratch, buffers, memory, backup, now)
+
+
+@jit
+def island(template, model, state, scratch, memory, backup):
+    """A Session for an island of the scene whose Session is `template`: the scene's excitation, tableau and settings,
+    the island's own model, state (views on memory), backup and recorder, and loop buffers made here. An island is
+    never refreshed (its Run is assembled from its recorder), so it shares the template's `now`."""
+    return _new(model, template.excitation, template.tableau, template.config, state, scratch,
+                buffers(model, state.physical.y.shape[0], True), memory, backup, template.now)
 
 
 @jit
