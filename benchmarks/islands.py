@@ -3,7 +3,7 @@ section's cluster (pick-and-place, rtol 1e-6, 1 s) at each N and window, interle
 wall time both ways, the islands' compiled work alone (`session.windows`), berry-steps (each island's steps × its
 berries, against steps × N), islands formed and rolled back, and their mean size; then what one step of a
 one-berry island costs against a berry-step of the whole cluster.
-Run: .venv/bin/python benchmarks/islands.py [N ...] [--windows 0.01 0.02 0.04] [--repeats 3]"""
+Run: .venv/bin/python benchmarks/islands.py [N ...] [--windows 0.01 0.02 0.04] [--repeats 3] [--join 5e-4] [--stay 5e-3]"""
 from __future__ import annotations
 
 import argparse
@@ -32,7 +32,10 @@ def main() -> None:
     ap.add_argument("sizes", nargs="*", type=int, default=[10, 30, 100, 300])
     ap.add_argument("--windows", nargs="+", type=float, default=[0.01, 0.02, 0.04])
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--join", type=float, default=isl.JOIN, help="m: the distance below which berries join")
+    ap.add_argument("--stay", type=float, default=isl.STAY, help="m: the distance above which they part")
     a = ap.parse_args()
+    isl.JOIN, isl.STAY = a.join, a.stay
     isl.ses.windows = timed_windows
     for n in a.sizes:
         sc = scene("cluster", n)
