@@ -234,3 +234,24 @@ def test_islands_merged_twice_in_one_window_keep_what_they_recorded(monkeypatch)
     assert isl.rollbacks >= 2
     np.testing.assert_array_equal(run.impacts.pair, whole.impacts.pair)
     assert np.abs(run.y - whole.y).max() < 1e-6
+
+
+def test_a_scene_asks_for_islands():
+    """`solver.islands = true` runs `simulate` in multirate islands (the Run of Islands(scene).run(), one Solver's
+    impacts); a method or fixed step islands cannot take is refused at load, naming the key; a caller's paper
+    method runs without them."""
+    doc = cluster_scene(ClusterSpec(berries=12, seed=1, solver={"t_end": 0.6, "rtol": 1e-8, "atol": 1e-11,
+                                                                "islands": True}))
+    sc = scene_from_dict(doc, Path.cwd())
+    run = simulate(sc)
+    assert run.stats["islands_formed"] > 5 and run.summary()["islands_formed"] == run.stats["islands_formed"]
+    np.testing.assert_array_equal(run.y, Islands(sc).run().y)
+    whole = simulate(replace(sc, solver=replace(sc.solver, islands=False)))
+    assert "islands_formed" not in whole.stats and len(whole.impacts) > 5
+    np.testing.assert_array_equal(run.impacts.pair, whole.impacts.pair)
+    np.testing.assert_allclose(run.impacts.onset, whole.impacts.onset, atol=1e-7)
+    for bad, why in (({"method": "paper"}, "'event' method"), ({"fixed_step": 1e-4}, "adaptive steps"),
+                     ({"islands": 1}, "true or false")):
+        with pytest.raises(SceneError, match=r"solver\.islands: .*" + why):
+            scene_from_dict({**doc, "solver": {**doc["solver"], **bad}}, Path.cwd())
+    assert "islands_formed" not in simulate(sc, t_end=0.05, method="paper").stats

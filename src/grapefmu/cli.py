@@ -59,7 +59,9 @@ def _summary_table(run) -> str:
     rows = [
         ("simulated", f"{s['t_end_s']:.4g} s, {s['samples']} samples, method {s['method']}"),
         ("solver", f"{s.get('steps', '-')} steps, {s.get('rejected', '-')} rejected, "
-                   f"{s.get('rhs_evaluations', '-')} RHS evaluations, {s['wall_time_s']:.4g} s wall"),
+                   f"{s.get('rhs_evaluations', '-')} RHS evaluations, {s['wall_time_s']:.4g} s wall"
+                   + (f"; in multirate islands: {s['islands_formed']} formed, {s['island_rollbacks']} rolled back"
+                      if "islands_formed" in s else "")),
         ("collisions", str(s["collision_count"])),
         ("peak contact force", f"{s['peak_contact_force_n']:.4g} N"),
         ("peak pedicel tension", f"{s['peak_pedicel_tension_n']:.4g} N"),

@@ -16,7 +16,7 @@ from ..model import excitation as exc
 from . import validate as v
 from ..model.contact import LAWS, ContactLaw, hertz_stiffness, hunt_crossley_chi, kelvin_voigt_damping
 from ..model.model import (OBSTACLE_KINDS, Berry, ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings,
-                           Thresholds)
+                           Thresholds, islands_refusal)
 from .budget import check_state
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
@@ -50,7 +50,7 @@ EXCITATION_KEYS = {
     "pose-table": {"kind", "file"},
 }
 SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events",
-               "contact_location"}
+               "contact_location", "islands"}
 THRESHOLD_KEYS = {"detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction"}
 
 
@@ -354,7 +354,7 @@ def _solver(raw: Any) -> SolverSettings:
     v.no_unknown_keys(key, raw, SOLVER_KEYS)
     d = SolverSettings()
     t_end = v.number(f"{key}.t_end", raw.get("t_end", d.t_end), 0.0, 1e5, lo_open=True, unit="s")
-    return SolverSettings(
+    s = SolverSettings(
         method=v.choice(f"{key}.method", raw.get("method", d.method), ("event", "paper", "reference")),
         rtol=v.number(f"{key}.rtol", raw.get("rtol", d.rtol), 1e-14, 0.1),
         atol=v.number(f"{key}.atol", raw.get("atol", d.atol), 1e-16, 1.0, lo_open=True),
@@ -367,7 +367,12 @@ def _solver(raw: Any) -> SolverSettings:
         zeno_max_events=v.integer(f"{key}.zeno_max_events", raw.get("zeno_max_events", d.zeno_max_events), 2, 10**6),
         contact_location=v.choice(f"{key}.contact_location", raw.get("contact_location", d.contact_location),
                                   ("events", "step-control")),
+        islands=v.boolean(f"{key}.islands", raw.get("islands", d.islands)),
     )
+    why = islands_refusal(s.method, s.fixed_step) if s.islands else None
+    if why:
+        raise SceneError(f"{key}.islands", why)
+    return s
 
 
 def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:

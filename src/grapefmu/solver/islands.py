@@ -22,7 +22,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..errors import SolverError
-from ..model.model import Scene
+from ..model.model import Scene, islands_refusal
 from ..physics.layout import layout, layout_of
 from ..results.contacts import ContactLog
 from ..results.impacts import Impacts
@@ -162,8 +162,9 @@ class Islands:
 
     def __init__(self, scene: Scene, *, rtol: float | None = None, atol: float | None = None,
                  window: float = WINDOW, max_steps: int = 10_000_000):
-        if scene.solver.method != "event":
-            raise SolverError(f"method: islands run the 'event' method, got {scene.solver.method!r}")
+        why = islands_refusal(scene.solver.method, scene.solver.fixed_step)
+        if why:
+            raise SolverError(f"solver: {why}")
         if not window > 0.0:
             raise SolverError(f"window: must be > 0 s, got {window!r}")
         self.scene, self.window, self.max_steps = scene, window, max_steps
