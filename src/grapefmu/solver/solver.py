@@ -20,7 +20,7 @@ from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCIT
 from ..model.model import Scene, off_axis
 from ..physics import observe as obs
 from ..physics.compiled import jit
-from ..physics.excitation import ACCEL_COMPONENTS, INPUT, base_accel
+from ..physics.excitation import ACCEL_COMPONENTS, base_accel
 from ..physics.kinematics import kinematics, workspace
 from ..physics.layout import LEDGER_TERMS, angular_velocity, initial, ledger, layout_of, orientation
 from ..results import catalogue
