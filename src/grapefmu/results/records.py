@@ -14,6 +14,9 @@ IMPACT = np.dtype([("pair", "i8"), ("onset", "f8"), ("end", "f8"), ("approach_sp
 #: and the largest contact force and pedicel tension (refined on the dense output)
 TOTALS = np.dtype([("collision_count", "i8"), ("bruising_impacts", "i8"), ("berries_over_detachment_force", "i8"),
                    ("peak_contact_force", "f8"), ("peak_pedicel_tension", "f8")])
+#: TOTALS over parts of a scene (islands, groups): the counts add up, the peaks take the largest
+COUNTS = tuple(f for f in TOTALS.names if TOTALS[f].kind == "i")
+PEAKS = tuple(f for f in TOTALS.names if TOTALS[f].kind == "f")
 
 
 def concat(arrays) -> np.ndarray:

@@ -26,7 +26,8 @@ from ..model.model import Scene, islands_refusal
 from ..physics.layout import layout, layout_of
 from ..results.contacts import ContactLog
 from ..results.impacts import Impacts
-from ..results.records import IMPACT, TOTALS, concat
+from ..physics import excitation
+from ..results.records import COUNTS, IMPACT, PEAKS, TOTALS, concat
 from ..results.run import Run
 from . import session as ses
 from . import state as st
@@ -47,28 +48,27 @@ STAY = 5e-3
 #: samples an island's recorder holds at first: the rest of the run up to this many (rows not written are never
 #: touched, so room costs address space only; growing a recorder costs a new session)
 ROWS = 4096
-_COUNTS = ("collision_count", "bruising_impacts", "berries_over_detachment_force")
-_PEAKS = ("peak_contact_force", "peak_pedicel_tension")
 
 
 class _System:
-    """An island's compiled side: its model (the scene's arrays for its berries, pairs and couplings, renumbered),
-    state in one buffer with its backup, recorder and session (session.island). Built once per shape (berries,
-    angles, couplings, pairs) and loaded with another island's berries in place (handover.form)."""
+    """An island's compiled side: its model (room for the scene's rows of its berries, pairs and couplings), state
+    in one buffer with its backup, recorder and session (session.island). Built once per shape (berries, angles,
+    couplings, pairs) and loaded with an island's berries in place (handover.form): until then its model and state
+    hold no island's values. Its recorder keeps no rachis accelerations: the run evaluates them once (_assemble)."""
 
     __slots__ = ("M", "layout", "state", "memory", "backup", "parent", "rec", "session")
 
-    def __init__(self, parent: Solver, members: np.ndarray, pairs: np.ndarray, couplings: np.ndarray, n_dof: int,
-                 rows: int):
+    def __init__(self, parent: Solver, n: int, n_dof: int, n_couplings: int, n_pairs: int, rows: int):
         M = parent.M
-        self.M = M._replace(berry=M.berry[members], pair=M.pair[pairs], coupling=M.coupling[couplings], n_dof=n_dof)
-        self.layout = lay = layout(len(members), n_dof, len(couplings), M.turning)
+        self.M = M._replace(berry=np.zeros(n, M.berry.dtype), pair=np.zeros(n_pairs, M.pair.dtype),
+                            coupling=np.zeros(n_couplings, M.coupling.dtype), n_dof=n_dof)
+        self.layout = lay = layout(n, n_dof, n_couplings, M.turning)
         self.memory, self.state = blank_state(lay, parent.tableau, self.M, parent.config,
                                               parent.state.book.ring.shape[1], 0.0, int(parent.state.fingerprint[0]),
                                               np.zeros(lay.size))
         self.backup = np.zeros_like(self.memory)
         self.parent = parent
-        self.rec = st.recorder(rows, lay.size, len(pairs), max(len(pairs), 1) * 64)
+        self.rec = st.recorder(rows, lay.size, n_pairs, max(n_pairs, 1) * 64)._replace(accel=np.empty((0, 6)))
         self.session = self._session()
 
     def _session(self) -> ses.Session:
@@ -197,11 +197,11 @@ class Islands:
         lay, n = self.layout, self.n_samples
         self.scene_offsets = np.array([lay.base_velocity.start, lay.d_hinge.start, lay.d_coupling.start, lay.d,
                                        lay.d_contact, lay.work])
-        self.y, self.accel = np.zeros((n, lay.size)), np.zeros((n, 6))
-        self.y[0], self.accel[0] = S.physical.y, self.whole.base_accel
+        self.y = np.zeros((n, lay.size))
+        self.y[0] = S.physical.y
         self.totals = np.repeat(S.book.totals, n)  # the pairs that start in contact count from the start (Solver's)
         self.later = np.zeros(n + 1, dtype=TOTALS)
-        for f in _PEAKS:
+        for f in PEAKS:
             self.later[f] = -np.inf
         self.ledger_later = np.zeros((n + 1, 2))
         self.counters = np.zeros(len(st.BOOK_COUNTERS.names), dtype=np.int64)
@@ -213,7 +213,7 @@ class Islands:
         and free its system."""
         system = seg.system
         retire(system.session, self.G, seg.members, seg.dofs, seg.pairs, seg.couplings, self.scene_offsets, seg.k0,
-               self.y, self.accel, self.totals, self.later, self.ledger_later)
+               self.y, self.totals, self.later, self.ledger_later)
         done = system.state.book.counters.view(np.int64)
         self.counters += done
         self.berry_steps += len(seg.members) * int(done[0])  # steps come first in BOOK_COUNTERS
@@ -230,7 +230,7 @@ class Islands:
         shape = (len(members), len(dofs), len(couplings), len(pairs))
         pool = self.free.get(shape)
         rows = min(self.n_samples - k0 + 1, ROWS)
-        system = pool.pop() if pool else _System(self.whole, members, pairs, couplings, len(dofs), rows)
+        system = pool.pop() if pool else _System(self.whole, *shape, rows)
         w = self.whole
         form(system.session, w.M, self.G, members, dofs, pairs, couplings, self.local, self.scene_offsets, t, self.t0,
              self.dt, k0)
@@ -369,11 +369,15 @@ class Islands:
         lay, n = self.layout, self.n_samples
         t = self.t0 + np.arange(n) * self.dt
         t[-1] = min(t[-1], t_end)
+        # a sample's acceleration as the step that ends on it records it: on the piece before a breakpoint
+        accel = np.empty((n, 6))
+        accel[0] = self.whole.base_accel
+        accel[1:] = excitation.accel(self.scene.excitation, t[1:], np.nextafter(t[1:], -np.inf))
         y, totals, later = self.y, self.totals, self.later[:n]
         y[:, [lay.d_contact, lay.work]] += np.cumsum(self.ledger_later[:n], axis=0)
-        for f in _COUNTS:
+        for f in COUNTS:
             totals[f] += np.cumsum(later[f])
-        for f in _PEAKS:
+        for f in PEAKS:
             np.maximum(totals[f], np.maximum.accumulate(later[f]), out=totals[f])
         finished, changes = [], []
         for seg in self.segments:
@@ -395,5 +399,5 @@ class Islands:
         stats |= {"wall_time": wall, "method": "event", "t_start": self.t0, "rtol": self.whole.rtol,
                   "atol": self.whole.atol, "fixed_step": self.whole.fixed_step, "islands_formed": self.formed,
                   "island_rollbacks": self.rollbacks, "window": self.window}
-        return Run(self.scene, t, y, log, self.accel, totals, Impacts.from_records(impacts, ongoing),
+        return Run(self.scene, t, y, log, accel, totals, Impacts.from_records(impacts, ongoing),
                    self.G[2]["peak_force"].copy(), self.G[4].copy(), stats)
