@@ -1,13 +1,17 @@
 """numba's reference counts are plain increments in grapefmu's process (physics/compiled.py): safe only while no
-compiled function releases the GIL, and it must not change a single number nor keep anything alive."""
+compiled function releases the GIL, and it must not change a single number nor keep anything alive. The cache is
+stamped with every core source."""
 from __future__ import annotations
 
 import ast
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+import grapefmu
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -113,3 +117,34 @@ def test_a_second_process_runs_islands_without_compiling():
     formed, compiled = out.stdout.strip().splitlines()[-1].split(" ", 1)
     assert int(formed) > 3  # islands formed and retired: the list was built and changed
     assert compiled == "[]", compiled
+
+
+_CACHED = r'''
+import numpy as np
+from grapefmu.solver.drift import components
+components(3, np.array([0]), np.array([1]), np.empty(3, np.int64))
+print(sum(components.stats.cache_hits.values()), sum(components.stats.cache_misses.values()))
+'''
+
+
+def test_an_edit_to_any_core_source_retires_every_cached_function(tmp_path):
+    """numba checks a cached function against its own file only, but its machine code holds what it calls or
+    inlines from other files: the cache is stamped with every core source as well (physics/compiled.SOURCES). A
+    function whose own file did not change is loaded from the cache until another core file changes, then compiled
+    again."""
+    pkg = tmp_path / "pkg"
+    shutil.copytree(Path(grapefmu.__file__).parent, pkg / "grapefmu", ignore=shutil.ignore_patterns("__pycache__"))
+    env = {**os.environ, "PYTHONPATH": str(pkg), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def run() -> tuple[int, int]:
+        out = subprocess.run([sys.executable, "-c", _CACHED], env=env, capture_output=True, text=True, timeout=300)
+        assert out.returncode == 0, out.stderr
+        hits, misses = map(int, out.stdout.split())
+        return hits, misses
+
+    assert run() == (0, 1)   # compiled
+    assert run() == (1, 0)   # loaded: drift.py is unchanged
+    with open(pkg / "grapefmu/physics/kinematics.py", "a") as f:
+        f.write("\n# an edit elsewhere in the core\n")
+    assert run() == (0, 1)   # compiled again, though drift.py is still unchanged
+    assert run() == (1, 0)

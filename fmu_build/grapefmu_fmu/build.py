@@ -175,13 +175,16 @@ def _warm_up(scene: Path) -> None:
 
 def _live_cache_files(bundle: Path) -> list[Path]:
     """The numba cache files of the bundle that its sources can use: each index whose source stamp (the
-    SHA-256 of the module's bytes, as numba 0.68 checks it) matches, and the data files it lists. A working
-    checkout also holds the entries of earlier versions of its functions, which would only make the FMU
-    larger (and past the cross-check's 10 MB)."""
+    SHA-256 of the module's bytes, as numba 0.68 checks it, and the digest of the core's sources,
+    physics/compiled.SOURCES) matches, and the data files it lists. A working checkout also holds the entries of
+    earlier versions of its functions, which would only make the FMU larger (and past the cross-check's 10 MB)."""
     import pickle
 
     import numba
 
+    from grapefmu.physics.compiled import sources_digest
+
+    core = sources_digest(bundle / "grapefmu")
     out = []
     for index in sorted(bundle.rglob("__pycache__/*.nbi")):
         source = index.parent.parent / f"{index.name.split('.', 1)[0]}.py"
@@ -192,7 +195,7 @@ def _live_cache_files(bundle: Path) -> list[Path]:
             digest = hashlib.sha256(source.read_bytes()).digest()
         except (OSError, pickle.UnpicklingError, ValueError, EOFError):
             continue
-        if version == numba.__version__ and stamp == digest:
+        if version == numba.__version__ and stamp == (digest, core):
             out += [index, *(index.parent / name for name in overloads.values() if (index.parent / name).exists())]
     return out
 

@@ -1,8 +1,10 @@
-"""The numba decorators every compiled module uses (one place for the compile options), and how numba counts
-references in this process."""
+"""The numba decorators every compiled module uses (one place for the compile options and the cache's stamp), and
+how numba counts references in this process."""
 from __future__ import annotations
 
+import hashlib
 import os
+from pathlib import Path
 
 import numba as nb
 from llvmlite import ir
@@ -52,6 +54,42 @@ def _plain_inc_dec(module, op, ordering):
 
 PLAIN_REFCOUNTS = plain_reference_counts()
 
-jit = nb.njit(cache=True, error_model="numpy")
-#: small helpers are inlined into their callers: a call boundary costs more than their arithmetic
-inline = nb.njit(cache=True, error_model="numpy", inline="always")
+#: the subpackages whose sources compiled code is built from (its functions, and the dtypes and constants they read)
+CORE = ("bench", "model", "physics", "results", "solver")
+
+
+def sources_digest(root: Path = Path(__file__).resolve().parents[1]) -> bytes:
+    """A digest of every source in CORE under the package root (names and contents)."""
+    h = hashlib.sha256()
+    for p in sorted(q for sub in CORE for q in (root / sub).rglob("*.py")):
+        h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes() + b"\0")
+    return h.digest()
+
+
+#: what every cached function's index is stamped with besides its own file
+SOURCES = sources_digest()
+
+
+def _stamped(dispatcher):
+    """The dispatcher, its cache stamped with SOURCES as well. Why: numba checks a cached function against its own
+    file only, yet its machine code holds the functions it calls or inlines from other files. After an edit or an
+    upgrade that changed only a callee, a caller loaded stale code from the cache: a wrong result, or a write past
+    an array that aborted the process (free(): invalid pointer, 2026-11-26). With the stamp, a change to any core
+    source makes every cached function compile again, once. (numba internals, checked by tests/test_compiled.py.)"""
+    cache_file = dispatcher._cache._cache_file
+    cache_file._source_stamp = (cache_file._source_stamp, SOURCES)
+    return dispatcher
+
+
+_jit = nb.njit(cache=True, error_model="numpy")
+_inline = nb.njit(cache=True, error_model="numpy", inline="always")
+
+
+def jit(f):
+    """A compiled function, cached on disk (stamped with SOURCES)."""
+    return _stamped(_jit(f))
+
+
+def inline(f):
+    """A small helper compiled into its callers (a call boundary costs more than its arithmetic), cached as jit."""
+    return _stamped(_inline(f))
