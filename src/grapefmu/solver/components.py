@@ -19,7 +19,7 @@ from ..physics.forces import CONTACT
 from ..physics.layout import layout_of
 from ..results.contacts import CHANGE, ContactLog
 from ..results.impacts import Impacts
-from ..results.records import TOTALS, concat
+from ..results.records import COUNTS, PEAKS, TOTALS, concat
 from ..results.run import Run
 
 
@@ -112,9 +112,9 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
             changes.append(ch)
             peak_force[glob] = run.peak_force
         peak_tension[members] = run.peak_tension
-        for f in ("collision_count", "bruising_impacts", "berries_over_detachment_force"):
+        for f in COUNTS:
             totals[f] += run.totals[f]
-        for f in ("peak_contact_force", "peak_pedicel_tension"):
+        for f in PEAKS:
             totals[f] = np.maximum(totals[f], run.totals[f])
         rec = run.impacts.records()
         rec["pair"] = glob[rec["pair"]] if len(rec) else rec["pair"]

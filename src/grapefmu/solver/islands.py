@@ -23,10 +23,10 @@ import numpy as np
 
 from ..errors import SolverError
 from ..model.model import Scene, islands_refusal
+from ..physics import excitation
 from ..physics.layout import layout, layout_of
 from ..results.contacts import ContactLog
 from ..results.impacts import Impacts
-from ..physics import excitation
 from ..results.records import COUNTS, IMPACT, PEAKS, TOTALS, concat
 from ..results.run import Run
 from . import session as ses
