@@ -70,19 +70,18 @@ def applied_accel(X, inp, t, t_ref):
 
 
 @jit
-def _series(X, t, t_ref, out):
+def _series(X, t, out):
     for k in range(t.shape[0]):
-        out[k, 0], out[k, 1], out[k, 2], out[k, 3], out[k, 4], out[k, 5] = base_accel(X, t[k], t_ref[k])
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3], out[k, 4], out[k, 5] = base_accel(X, t[k], t[k])
 
 
-def accel(excitation: Excitation, t, t_ref=None) -> np.ndarray:
+def accel(excitation: Excitation, t) -> np.ndarray:
     """(a, α)(t) as an array (..., 6) of ACCEL_COMPONENTS (m/s², rad/s², world frame), for plots, controllers and
-    checks: on the smooth pieces that hold t_ref (same shape; default t, right-continuous)."""
+    checks."""
     t = np.asarray(t, dtype=float)
     flat = np.ascontiguousarray(t.reshape(-1))
-    ref = flat if t_ref is None else np.ascontiguousarray(np.broadcast_to(np.asarray(t_ref, float), t.shape).ravel())
     out = np.empty((flat.size, 6))
-    _series(excitation.arrays, flat, ref, out)
+    _series(excitation.arrays, flat, out)
     return out.reshape(t.shape + (6,))
 
 

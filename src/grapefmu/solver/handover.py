@@ -151,9 +151,9 @@ def scatter(s, G, members, dofs, pairs, couplings, scene_offsets):
 
 
 @jit
-def retire(s, G, members, dofs, pairs, couplings, scene_offsets, k0, y, totals, later, ledger_later):
+def retire(s, G, members, dofs, pairs, couplings, scene_offsets, k0, y, accel, totals, later, ledger_later):
     """Island session s's state back into the scene's G (scatter), and what its recorder holds into the run's
-    arrays from sample k0 on: y (the scene's layout) and totals, to which it adds its counts and
+    arrays from sample k0 on: y (the scene's layout) and accel, and totals, to which it adds its counts and
     energy integrals and where it raises the peaks. What it closed with holds for every later sample: its totals
     go into `later` and its energy integrals (contacts, work) into `ledger_later`, at the sample after its last
     (the run sums and raises them over the samples after, Islands._assemble)."""
@@ -176,6 +176,7 @@ def retire(s, G, members, dofs, pairs, couplings, scene_offsets, k0, y, totals, 
             y[row, s_dc + couplings[c]] = Y[o_dc + c]
         y[row, s_contact] += Y[o_contact]
         y[row, s_work] += Y[o_work]
+        accel[row, :] = R.accel[k, :]
         _add(totals[row], R.totals[k])
     _add(later[k0 + r], S.book.totals[0])
     Y = S.physical.y

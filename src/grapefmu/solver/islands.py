@@ -23,7 +23,6 @@ import numpy as np
 
 from ..errors import SolverError
 from ..model.model import Scene, islands_refusal
-from ..physics import excitation
 from ..physics.layout import layout, layout_of
 from ..results.contacts import ContactLog
 from ..results.impacts import Impacts
@@ -54,7 +53,7 @@ class _System:
     """An island's compiled side: its model (room for the scene's rows of its berries, pairs and couplings), state
     in one buffer with its backup, recorder and session (session.island). Built once per shape (berries, angles,
     couplings, pairs) and loaded with an island's berries in place (handover.form): until then its model and state
-    hold no island's values. Its recorder keeps no rachis accelerations: the run evaluates them once (_assemble)."""
+    hold no island's values."""
 
     __slots__ = ("M", "layout", "state", "memory", "backup", "parent", "rec", "session")
 
@@ -68,7 +67,7 @@ class _System:
                                               np.zeros(lay.size))
         self.backup = np.zeros_like(self.memory)
         self.parent = parent
-        self.rec = st.recorder(rows, lay.size, n_pairs, max(n_pairs, 1) * 64)._replace(accel=np.empty((0, 6)))
+        self.rec = st.recorder(rows, lay.size, n_pairs, max(n_pairs, 1) * 64)
         self.session = self._session()
 
     def _session(self) -> ses.Session:
@@ -197,8 +196,8 @@ class Islands:
         lay, n = self.layout, self.n_samples
         self.scene_offsets = np.array([lay.base_velocity.start, lay.d_hinge.start, lay.d_coupling.start, lay.d,
                                        lay.d_contact, lay.work])
-        self.y = np.zeros((n, lay.size))
-        self.y[0] = S.physical.y
+        self.y, self.accel = np.zeros((n, lay.size)), np.zeros((n, 6))
+        self.y[0], self.accel[0] = S.physical.y, self.whole.base_accel
         self.totals = np.repeat(S.book.totals, n)  # the pairs that start in contact count from the start (Solver's)
         self.later = np.zeros(n + 1, dtype=TOTALS)
         for f in PEAKS:
@@ -213,7 +212,7 @@ class Islands:
         and free its system."""
         system = seg.system
         retire(system.session, self.G, seg.members, seg.dofs, seg.pairs, seg.couplings, self.scene_offsets, seg.k0,
-               self.y, self.totals, self.later, self.ledger_later)
+               self.y, self.accel, self.totals, self.later, self.ledger_later)
         done = system.state.book.counters.view(np.int64)
         self.counters += done
         self.berry_steps += len(seg.members) * int(done[0])  # steps come first in BOOK_COUNTERS
@@ -369,10 +368,6 @@ class Islands:
         lay, n = self.layout, self.n_samples
         t = self.t0 + np.arange(n) * self.dt
         t[-1] = min(t[-1], t_end)
-        # a sample's acceleration as the step that ends on it records it: on the piece before a breakpoint
-        accel = np.empty((n, 6))
-        accel[0] = self.whole.base_accel
-        accel[1:] = excitation.accel(self.scene.excitation, t[1:], np.nextafter(t[1:], -np.inf))
         y, totals, later = self.y, self.totals, self.later[:n]
         y[:, [lay.d_contact, lay.work]] += np.cumsum(self.ledger_later[:n], axis=0)
         for f in COUNTS:
@@ -399,5 +394,5 @@ class Islands:
         stats |= {"wall_time": wall, "method": "event", "t_start": self.t0, "rtol": self.whole.rtol,
                   "atol": self.whole.atol, "fixed_step": self.whole.fixed_step, "islands_formed": self.formed,
                   "island_rollbacks": self.rollbacks, "window": self.window}
-        return Run(self.scene, t, y, log, accel, totals, Impacts.from_records(impacts, ongoing),
+        return Run(self.scene, t, y, log, self.accel, totals, Impacts.from_records(impacts, ongoing),
                    self.G[2]["peak_force"].copy(), self.G[4].copy(), stats)

@@ -101,9 +101,8 @@ def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
         for r in range(y0.shape[0]):  # element by element: a row view costs reference counts per sample
             ys[o, r] = dense_component(theta, y0, q, h, r)
         ts[o] = tg
-        if accels.shape[0] > 0:
-            accels[o, 0], accels[o, 1], accels[o, 2], accels[o, 3], accels[o, 4], accels[o, 5] = applied_accel(
-                X, inp, tg, t0)
+        accels[o, 0], accels[o, 1], accels[o, 2], accels[o, 3], accels[o, 4], accels[o, 5] = applied_accel(
+            X, inp, tg, t0)
         tots[o] = totals[0]
         o += 1
         kg += 1

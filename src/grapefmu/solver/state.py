@@ -102,7 +102,7 @@ class Recorder(NamedTuple):
 
     t: np.ndarray          # (cap,)
     y: np.ndarray          # (cap, ny)
-    accel: np.ndarray      # (cap, 6) ACCEL_COMPONENTS, or (0, 6): none recorded (an island's: its run evaluates them)
+    accel: np.ndarray      # (cap, 6) ACCEL_COMPONENTS
     totals: np.ndarray     # (cap,) TOTALS
     changes: np.ndarray    # (cap_changes,) results.contacts.CHANGE, the sample index within this recorder
     logged: np.ndarray     # (P,) CONTACT: each pair's record as the samples from its last change on hold it
