@@ -177,7 +177,8 @@ def markdown(data: dict, plot_rel: str) -> str:
     L = [BEGIN, "## Scale: cost against the number of berries", "",
          "From `grapefmu bench --scale` (it rewrites this section); pick-and-place move (lift 0.1 m, carry 0.3 m, "
          f"place), rtol {RTOL:g}, atol {RTOL * 1e-3:g}, cost = the minimum wall time of a few runs after a warm-up and "
-         f"of {PASSES} more runs, one a pass over every size and both ways (interleaved), per simulated second over {T_COST:g} s; error = largest twig-angle error over the first {T_ERROR:g} s against "
+         f"of {PASSES} more runs, one a pass over every size and both ways (interleaved), per simulated second over "
+         f"{T_COST:g} s; error = largest twig-angle error over the first {T_ERROR:g} s against "
          "the same scene at rtol 1e-10. Row: N berries 28 mm apart on one rod (1 mm gaps), planar, twig lengths 30 mm ± 15 % (seed 1) so that neighbours swing apart. Cluster: "
          "`grapefmu cluster --berries N --seed 1` (spherical twigs). Measured "
          f"{data.get('when', 'on an unrecorded date')}: compare its costs with the rest of the report only through "

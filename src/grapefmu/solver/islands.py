@@ -85,6 +85,7 @@ class _System:
         self.rec.changes[:nc] = old.changes[:nc]
         self.session = self._session()
 
+
 class _Segment:
     """One island over the windows it lived through: its berries, pairs and couplings (scene indices), its system,
     from output sample k0 on, and what it recorded that the run assembles last (its impacts and contact changes;
@@ -213,9 +214,9 @@ class Islands:
         system = seg.system
         retire(system.session, self.G, seg.members, seg.dofs, seg.pairs, seg.couplings, self.scene_offsets, seg.k0,
                self.y, self.accel, self.totals, self.later, self.ledger_later)
-        done = system.state.book.counters.view(np.int64)
-        self.counters += done
-        self.berry_steps += len(seg.members) * int(done[0])  # steps come first in BOOK_COUNTERS
+        done = system.state.book.counters
+        self.counters += done.view(np.int64)
+        self.berry_steps += len(seg.members) * int(done["steps"][0])
         rec = system.rec
         seg.changes = rec.changes[:int(rec.cursor["n_changes"][0])].copy()
         seg.impacts += seg.window

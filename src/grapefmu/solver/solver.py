@@ -117,8 +117,8 @@ class Solver:
                           s.contact_location == "step-control" and self.method == "event", th.bruise_force,
                           th.bruise_energy, th.detachment_force)
         self._closed: list[np.ndarray] = []
-        self._memory, self.state = self._fresh_state(s.zeno_max_events, float(t_start))  # the state's arrays
-        # live in _memory from now on
+        # the state's arrays are views on _memory, so that a step's backup and rollback are one copy each
+        self._memory, self.state = self._fresh_state(s.zeno_max_events, float(t_start))
         self._backup = np.zeros_like(self._memory)
         self._scratch = st.recorder(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
         m, lay, y = self.model, self.layout, self.state.physical.y

@@ -166,16 +166,39 @@ def copy(state: SolverState) -> SolverState:
         BroadPhase(B.near.copy(), B.count.copy(), B.reference.copy()), state.fingerprint.copy())
 
 
+def _names(cls=SolverState, prefix: str = ""):
+    """flatten's dotted names in its order, from the classes alone."""
+    for f in cls._fields:
+        sub = _GROUPS.get(f)
+        yield from _names(sub, f"{prefix}{f}.") if sub else (prefix + f,)
+
+
+def _build(cls, arrays):
+    """The state (or group) cls from an iterator over its arrays in _names' order."""
+    return cls(*[_build(_GROUPS[f], arrays) if f in _GROUPS else next(arrays) for f in cls._fields])
+
+
+_NAMES = tuple(_names())
+
+
 @functools.lru_cache(maxsize=256)
 def _plan(ny: int, npair: int, n: int, stages: int, k: int, zeno_max: int):
     """Each array of a state of these sizes as (shape, dtype, byte offset) in flatten's order, each 16-byte aligned,
     and the buffer's size in 8-byte words (+ 2: an empty array may sit at the very end)."""
-    shapes = ((1,), (ny,), (npair,), (1,), (ny,), (ny,), (stages, ny), (ny, k), (1,), (1,), (1,), (npair,), (n,),
-              (npair, zeno_max), (npair,), (1,), (n, 6), (1,))
-    dtypes = (np.float64, np.float64, CONTACT, INPUT, np.float64, np.float64, np.float64, np.float64, CLOCK,
-              BOOK_COUNTERS, TOTALS, BOOK_PAIR, np.float64, np.float64, np.int64, np.int64, np.float64, np.uint64)
+    f8 = np.float64
+    shapes = {"physical.t": ((1,), f8), "physical.y": ((ny,), f8), "physical.contacts": ((npair,), CONTACT),
+              "input": ((1,), INPUT),
+              "integrator.f": ((ny,), f8), "integrator.y_prev": ((ny,), f8), "integrator.stages": ((stages, ny), f8),
+              "integrator.dense": ((ny, k), f8), "integrator.clock": ((1,), CLOCK),
+              "book.counters": ((1,), BOOK_COUNTERS), "book.totals": ((1,), TOTALS), "book.pair": ((npair,), BOOK_PAIR),
+              "book.peak_tension": ((n,), f8), "book.ring": ((npair, zeno_max), f8),
+              "broad_phase.near": ((npair,), np.int64), "broad_phase.count": ((1,), np.int64),
+              "broad_phase.reference": ((n, 6), f8),
+              "fingerprint": ((1,), np.uint64)}
     plan, at = [], 0
-    for shape, dtype in zip(shapes, map(np.dtype, dtypes)):
+    for name in _NAMES:
+        shape, dtype = shapes[name]
+        dtype = np.dtype(dtype)
         at = -(-at // 16) * 16
         plan.append((shape, dtype, at))
         at += math.prod(shape) * dtype.itemsize
@@ -188,9 +211,8 @@ def zeros(ny: int, npair: int, n: int, stages: int, k: int, zeno_max: int) -> tu
     restoring it after a failure are then one copy of the buffer."""
     plan, words = _plan(ny, npair, n, stages, k, zeno_max)
     memory = np.zeros(words, np.uint64)
-    a = [np.ndarray(shape, dtype, buffer=memory, offset=at) for shape, dtype, at in plan]
-    return memory, SolverState(Physical(*a[0:3]), a[3], Integrator(*a[4:9]), Book(*a[9:14]), BroadPhase(*a[14:17]),
-                               a[17])
+    return memory, _build(SolverState, iter([np.ndarray(shape, dtype, buffer=memory, offset=at)
+                                             for shape, dtype, at in plan]))
 
 
 def _bytes(a: np.ndarray) -> np.ndarray:
