@@ -16,6 +16,7 @@ from grapefmu.bench.scenes import bench_scenes, build
 from grapefmu.physics.dynamics import rhs
 from grapefmu.physics.kinematics import kinematics
 from grapefmu.solver.broadphase import quiet
+from grapefmu.solver.loop import buffers
 from grapefmu.solver.sampling import sample_step
 from grapefmu.solver.solver import Solver
 from grapefmu.solver.step import dense_coefficients, error_norm, rk_step
@@ -92,7 +93,7 @@ def main(argv: list[str]) -> None:
     rtol = float(argv[0]) if argv else 1e-6
     s = Solver(sc, rtol=rtol, atol=rtol / 100)
     s.run(t_end=0.3 * sc.solver.t_end)  # the stages below write only scratch, the dense output and peaks
-    M, X, TB, S, config, Z = s.M, s.excitation, s.tableau, s.state, s.config, s._buffers
+    M, X, TB, S, config, Z = s.M, s.excitation, s.tableau, s.state, s.config, buffers(s.M, s.layout.size, False)
     h = float(S.integrator.clock["h_last"][0])
     n = max(200, int(2e5 / sc.model.n_berries))
     print(f"{name}, rtol {rtol:g}: {sc.model.n_berries} berries, {S.physical.y.shape[0]} state components, "

@@ -34,9 +34,9 @@ class Impacts:
     @classmethod
     def from_records(cls, finished: np.ndarray, ongoing: np.ndarray | None = None) -> Impacts:
         """Finished and ongoing IMPACT records, ordered by onset."""
-        ongoing = np.zeros(0, dtype=IMPACT) if ongoing is None else ongoing
-        rows = concat([finished, ongoing])
-        flag = np.r_[np.zeros(len(finished), bool), np.ones(len(ongoing), bool)]
+        rows, flag = finished, np.zeros(len(finished), bool)
+        if ongoing is not None and len(ongoing):
+            rows, flag = concat([finished, ongoing]), np.concatenate([flag, np.ones(len(ongoing), bool)])
         order = np.argsort(rows["onset"], kind="stable")
         rows, flag = rows[order], flag[order]
         return cls(rows["pair"].astype(int), rows["onset"], rows["end"], rows["approach_speed"],

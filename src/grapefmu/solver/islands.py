@@ -33,7 +33,7 @@ from . import state as st
 from .loop import IMPACTS_FULL, OUT_FULL
 from .drift import components, slack
 from .handover import form, parts, retire
-from .solver import STATUS_TEXT, Solver, blank_state, open_impacts, run_stats
+from .solver import STATUS_TEXT, Solver, open_impacts, run_stats
 
 #: the default window, s: long enough that a window's calls cost little against its steps, short enough that
 #: berries stay near their extrapolated paths (`grapefmu bench --scale` measures other lengths)
@@ -62,9 +62,8 @@ class _System:
         self.M = M._replace(berry=np.zeros(n, M.berry.dtype), pair=np.zeros(n_pairs, M.pair.dtype),
                             coupling=np.zeros(n_couplings, M.coupling.dtype), n_dof=n_dof)
         self.layout = lay = layout(n, n_dof, n_couplings, M.turning)
-        self.memory, self.state = blank_state(lay, parent.tableau, self.M, parent.config,
-                                              parent.state.book.ring.shape[1], 0.0, int(parent.state.fingerprint[0]),
-                                              np.zeros(lay.size))
+        # zeros, not a Solver's blank state: form writes every value an island reads
+        self.memory, self.state = st.zeros(lay.size, n_pairs, n, *parent.tableau.p.shape, parent.state.book.ring.shape[1])
         self.backup = np.zeros_like(self.memory)
         self.parent = parent
         self.rec = st.recorder(rows, lay.size, n_pairs, max(n_pairs, 1) * 64)
@@ -131,8 +130,9 @@ class _Batch:
         """Islands out leave, islands new come (the sessions list changed in place: rebuilding it costs more). Within
         a window (ran: the batch the new islands ran in) each island keeps its saved cursor, for a later rollback."""
         where = {id(s): k for k, s in enumerate(self.segs)}
-        saved = {} if ran is None else {id(s): self.saved[k].copy() for k, s in enumerate(self.segs)} | {
-            id(s): ran.saved[k].copy() for k, s in enumerate(ran.segs)}
+        if ran is not None:  # each island's saved cursor, by where it was: here or in ran
+            before = np.concatenate([self.saved, ran.saved])
+            where_before = where | {id(s): len(self.segs) + k for k, s in enumerate(ran.segs)}
         slots = sorted(where[id(s)] for s in out)
         for k, seg in zip(slots, new):
             self.segs[k] = seg
@@ -147,8 +147,8 @@ class _Batch:
             self.segs.pop()
             ses.take_last(self.sessions, k)
         self._index()
-        for k, seg in enumerate(self.segs if saved else ()):
-            self.saved[k] = saved[id(seg)]
+        if ran is not None:
+            self.saved[:] = before[[where_before[id(seg)] for seg in self.segs]]
 
     def grow(self, k: int) -> None:
         """Twice the room in island k's recorder."""
@@ -281,8 +281,15 @@ class Islands:
 
     def _regroup(self, t: float, t_w: float, k: int) -> None:
         """Islands for the window [t, t_w]: predict every berry's path (its drift taken from the last window), retire
-        the islands whose berries now group otherwise and form the new groups."""
+        the islands whose berries now group otherwise and form the new groups. The first window's paths start
+        from the start Solver's state, as from one island of every berry."""
         b = self.batch
+        if b is None:
+            every = np.arange(self.n)
+            ses.previews(ses.listed(self.whole._session), t_w - t, every, np.array([0, self.n]), self.lin, self.reach)
+            comp = self._components(self._slack(t_w - t), np.zeros(self.n, dtype=np.int64))
+            self.batch = _Batch([self._form(np.flatnonzero(comp == c), t, k) for c in np.unique(comp)], self.n)
+            return
         ses.previews(b.sessions, t_w - t, b.members, b.offsets, self.lin, self.reach)
         comp = self._components(self._slack(t_w - t), b.label)
         c, starts = comp[b.members], b.offsets[:-1]
@@ -348,7 +355,7 @@ class Islands:
         self.drifted = np.zeros(self.n)
         self.engaged = np.zeros(len(self.scene.model.pairs), dtype=bool)
         self.pending: set[_Segment] = set()
-        self.batch = _Batch([self._form(np.arange(self.n), t0, 1)], self.n)  # one island to predict from, split at once
+        self.batch: _Batch | None = None
         k = 0
         while k < n - 1:
             k_w = min(k + per, n - 1)
@@ -359,7 +366,7 @@ class Islands:
             k = k_w
             if progress:
                 progress(t_w, t_end)
-        for seg in self.batch.segs:
+        for seg in self.batch.segs if self.batch else ():
             self._retire(seg)
         return self._assemble(t_end, time.perf_counter() - wall_start)
 

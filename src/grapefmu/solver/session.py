@@ -23,7 +23,7 @@ from .drift import anchor, predict
 from .loop import DONE, REFUSED, buffers, integrate
 
 __all__ = ["Session", "advance", "derivative", "island", "listed", "new", "put", "refresh", "previews", "resume",
-           "take_last", "windows"]
+           "run", "take_last", "windows"]
 
 
 @structref.register
@@ -60,11 +60,12 @@ def _new_impl(model, excitation, tableau, config, state, scratch, buffers, memor
 
 
 @jit
-def new(model, excitation, tableau, config, state, scratch, buffers, memory, backup, now):
-    """A Session over these arrays (shared, not copied: the Solver keeps its numpy views of them). `buffers`
-    is the loop's loop.Buffers; `now` is (Observation, accel (1, 6), in_contact (1, P)) of one sample: what
-    `refresh` fills."""
-    return _new(model, excitation, tableau, config, state, scratch, buffers, memory, backup, now)
+def new(model, excitation, tableau, config, state, scratch, memory, backup, now):
+    """A Session over these arrays (shared, not copied: the Solver keeps its numpy views of them) and the loop's
+    buffers (loop.Buffers, made here: Python never reads them); `now` is (Observation, accel (1, 6), in_contact
+    (1, P)) of one sample: what `refresh` fills."""
+    return _new(model, excitation, tableau, config, state, scratch, buffers(model, state.physical.y.shape[0], False),
+                memory, backup, now)
 
 
 @jit
@@ -137,6 +138,13 @@ def refresh(s):
     for p in range(C.shape[0]):
         in_contact[0, p] = C[p].mode != 0
     observe(S.physical.y.reshape((1, S.physical.y.shape[0])), C.reshape((1, C.shape[0])), accel, s.model, observation)
+
+
+@jit
+def run(s, R, t_target, max_steps):
+    """Integrate towards t_target, recording into R (Solver.run's recorder, sized for the run, not the session's
+    scratch). Returns integrate's status."""
+    return integrate(s.model, s.excitation, s.tableau, s.state, s.config, R, s.buffers, t_target, max_steps)
 
 
 @jit

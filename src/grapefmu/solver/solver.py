@@ -32,7 +32,7 @@ from . import session as ses
 from . import state as st
 from .broadphase import rebuild
 from .events import classify, open_impact
-from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW, buffers, integrate
+from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW
 from .tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5, Tableau
 
 #: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
@@ -123,9 +123,8 @@ class Solver:
         self._scratch = st.recorder(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
         m, lay, y = self.model, self.layout, self.state.physical.y
         now = (obs.empty(1, m.n_berries, m.n_dof, len(m.pairs)), np.zeros((1, 6)), np.zeros((1, len(m.pairs)), bool))
-        self._buffers = buffers(self.M, self.layout.size, False)
         self._session = ses.new(self.M, self.excitation, self.tableau, self.config, self.state, self._scratch,
-                                self._buffers, self._memory, self._backup, now)
+                                self._memory, self._backup, now)
         observation, accel, in_contact = now
         self._snapshot = catalogue.Snapshot(self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel,
                                             y[None, lay.base], angular_velocity(lay, y[None]),
@@ -220,8 +219,7 @@ class Solver:
 
     # --- stepping --------------------------------------------------------------------------------
     def _integrate(self, t_target: float, recorder: st.Recorder, max_steps: int) -> int:
-        return integrate(self.M, self.excitation, self.tableau, self.state, self.config, recorder, self._buffers,
-                         t_target, max_steps)
+        return ses.run(self._session, recorder, t_target, max_steps)
 
     def _closed_into(self, rec: st.Recorder) -> None:
         """Move the impacts that ended out of the recorder."""
@@ -419,8 +417,10 @@ def open_impacts(contacts: np.ndarray, book_pair: np.ndarray, t: float) -> np.nd
     """The impacts still going on (pairs' CONTACT and BOOK_PAIR records), as rows that end at t (separation speed
     NaN)."""
     ps = np.flatnonzero(contacts["mode"] != 0)
-    bp = book_pair[ps]
     rows = np.zeros(len(ps), dtype=st.IMPACT)
+    if not len(ps):
+        return rows
+    bp = book_pair[ps]
     for f in ("onset", "approach_speed", "bruising"):
         rows[f] = bp[f]
     rows["peak_force"], rows["peak_time"] = bp["impact_peak"], bp["impact_peak_time"]
