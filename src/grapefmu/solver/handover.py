@@ -118,6 +118,8 @@ def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid
     cur = R.cursor[0]
     cur.grid_t0, cur.grid_dt, cur.grid_k = grid_t0, grid_dt, k0
     cur.n_out, cur.n_impacts, cur.n_changes = 0, 0, 0
+    s.buffers.members[:] = members
+    s.buffers.pairs[:] = pairs
     for p in range(pairs.shape[0]):
         R.logged[p] = S.physical.contacts[p]
 

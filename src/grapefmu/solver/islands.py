@@ -102,29 +102,23 @@ class _Segment:
 
 class _Batch:
     """The islands a window runs, as the compiled loop (session.windows) reads them: their sessions in a numba list
-    and their berries and pairs (scene indices) flattened, island k's from offsets[k] and pair_offsets[k]."""
+    (each holding its berries and pairs in the scene, handover.form), what each island's window returned, and each
+    berry's island (label; berries of no island in the batch keep what they held)."""
 
     def __init__(self, segs: list[_Segment], n: int):
-        self.segs, self.n = list(segs), n
+        self.segs = list(segs)
         self.sessions = ses.listed(segs[0].system.session)
         for k, seg in enumerate(segs[1:], 1):
             ses.put(self.sessions, k, seg.system.session)
+        self.label = np.zeros(n, dtype=np.int64)
         self._index()
 
     def _index(self) -> None:
-        segs = self.segs
-        sizes = np.array([len(s.members) for s in segs], dtype=np.int64)
-        self.members = np.concatenate([s.members for s in segs])
-        self.offsets = np.zeros(len(segs) + 1, dtype=np.int64)
-        np.cumsum(sizes, out=self.offsets[1:])
-        self.pairs = np.concatenate([s.pairs for s in segs])
-        self.pair_offsets = np.zeros(len(segs) + 1, dtype=np.int64)
-        np.cumsum([len(s.pairs) for s in segs], out=self.pair_offsets[1:])
-        self.saved = np.zeros(len(segs), dtype=st.CURSOR)
-        self.status = np.zeros(len(segs), dtype=np.int64)
-        self.n_impacts = np.zeros(len(segs), dtype=np.int64)
-        self.label = np.empty(self.n, dtype=np.int64)
-        self.label[self.members] = np.repeat(np.arange(len(segs)), sizes)
+        k = len(self.segs)
+        self.saved = np.zeros(k, dtype=st.CURSOR)
+        self.status = np.zeros(k, dtype=np.int64)
+        self.n_impacts = np.zeros(k, dtype=np.int64)
+        ses.labels(self.sessions, self.label)
 
     def replace(self, out: list[_Segment], new: list[_Segment], ran: _Batch | None = None) -> None:
         """Islands out leave, islands new come (the sessions list changed in place: rebuilding it costs more). Within
@@ -245,8 +239,8 @@ class Islands:
         k = 0
         while True:
             batch.n_impacts[:] = 0
-            k = ses.windows(batch.sessions, k, t_w, self.max_steps, fresh, batch.members, batch.offsets, batch.pairs,
-                            batch.pair_offsets, batch.saved, batch.status, batch.n_impacts, self.drifted, self.engaged)
+            k = ses.windows(batch.sessions, k, t_w, self.max_steps, fresh, batch.saved, batch.status, batch.n_impacts,
+                            self.drifted, self.engaged)
             for m in np.flatnonzero(batch.n_impacts):
                 seg = batch.segs[m]
                 seg.window.append(seg.system.rec.impacts[:batch.n_impacts[m]].copy())
@@ -285,16 +279,18 @@ class Islands:
         from the start Solver's state, as from one island of every berry."""
         b = self.batch
         if b is None:
-            every = np.arange(self.n)
-            ses.previews(ses.listed(self.whole._session), t_w - t, every, np.array([0, self.n]), self.lin, self.reach)
+            ses.preview(self.whole._session, t_w - t, np.arange(self.n), self.lin, self.reach)
             comp = self._components(self._slack(t_w - t), np.zeros(self.n, dtype=np.int64))
             self.batch = _Batch([self._form(np.flatnonzero(comp == c), t, k) for c in np.unique(comp)], self.n)
             return
-        ses.previews(b.sessions, t_w - t, b.members, b.offsets, self.lin, self.reach)
+        ses.previews(b.sessions, t_w - t, self.lin, self.reach)
         comp = self._components(self._slack(t_w - t), b.label)
-        c, starts = comp[b.members], b.offsets[:-1]
+        size = np.bincount(b.label, minlength=len(b.segs))
+        starts = np.zeros(len(b.segs), dtype=np.int64)
+        np.cumsum(size[:-1], out=starts[1:])
+        c = comp[np.argsort(b.label, kind="stable")]  # by island
         lo, hi = np.minimum.reduceat(c, starts), np.maximum.reduceat(c, starts)
-        kept = (lo == hi) & (np.bincount(comp)[lo] == np.diff(b.offsets))  # the same berries, no more
+        kept = (lo == hi) & (np.bincount(comp)[lo] == size)  # the same berries, no more
         out = [b.segs[k] for k in np.flatnonzero(~kept)]
         if out:
             for seg in out:

@@ -46,6 +46,8 @@ class Buffers(NamedTuple):
     suspect: np.ndarray  # (P,) whether the k-th near pair can switch in the step (broadphase.quiet)
     path: np.ndarray     # (D + 1, 3) or (0, 3): an island's window's extrapolated angles (drift.anchor)
     drifted: np.ndarray  # (N,) or (0,): how far each berry got from them (drift.drift)
+    members: np.ndarray  # (N,) or (0,): an island's berries in the scene (handover.form)
+    pairs: np.ndarray    # (P,) or (0,): its pairs in the scene
 
 
 @jit
@@ -55,7 +57,9 @@ def buffers(M, ny, island):
                    np.zeros((N_SAMPLES + 1, p)), np.zeros((N_SAMPLES + 1, p)),
                    np.zeros((N_SAMPLES + 1, p), dtype=np.int64), np.zeros((N_SAMPLES + 1, 2 * p)), workspace(M),
                    samples_for(M), np.zeros((M.berry.shape[0], 2)), np.ones(p, dtype=np.bool_),
-                   np.zeros((M.n_dof + 1 if island else 0, 3)), np.zeros(M.berry.shape[0] if island else 0))
+                   np.zeros((M.n_dof + 1 if island else 0, 3)), np.zeros(M.berry.shape[0] if island else 0),
+                   np.zeros(M.berry.shape[0] if island else 0, np.int64),
+                   np.zeros(M.pair.shape[0] if island else 0, np.int64))
 
 
 @inline

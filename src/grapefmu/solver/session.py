@@ -22,8 +22,8 @@ from ..physics.observe import observe
 from .drift import anchor, predict
 from .loop import DONE, REFUSED, buffers, integrate
 
-__all__ = ["Session", "advance", "derivative", "island", "listed", "new", "put", "refresh", "previews", "resume",
-           "run", "take_last", "windows"]
+__all__ = ["Session", "advance", "derivative", "island", "labels", "listed", "new", "preview", "previews", "put",
+           "refresh", "resume", "run", "take_last", "windows"]
 
 
 @structref.register
@@ -157,15 +157,13 @@ def resume(s, t_target, max_steps):
 
 
 @jit
-def windows(sessions, first, t_target, max_steps, fresh, members, offsets, pairs, pair_offsets, saved, status,
-            n_impacts, drifted, engaged):
+def windows(sessions, first, t_target, max_steps, fresh, saved, status, n_impacts, drifted, engaged):
     """Islands' windows (solver/islands.py) in one call, from island `first` on. Each island, if fresh[k], saves its
     state (memory -> backup) and its recorder's cursor (into saved[k]) and anchors its path (drift.anchor); it
     integrates towards t_target, then puts its berries' drift into drifted and whether its pairs are engaged (in
-    contact or in a Zeno window) into engaged, through members and pairs (the islands' scene indices, island k's
-    from offsets[k] and pair_offsets[k]). status[k] is integrate's status, n_impacts[k] the finished impacts in its
-    recorder; stops at the first island whose status is not DONE and returns its index (len(sessions) when all are
-    done)."""
+    contact or in a Zeno window) into engaged (scene indices, through its buffers' members and pairs). status[k] is
+    integrate's status, n_impacts[k] the finished impacts in its recorder; stops at the first island whose status is
+    not DONE and returns its index (len(sessions) when all are done)."""
     for k in range(first, len(sessions)):
         s = sessions[k]
         S = s.state
@@ -180,25 +178,38 @@ def windows(sessions, first, t_target, max_steps, fresh, members, offsets, pairs
         n_impacts[k] = s.scratch.cursor[0].n_impacts
         if st != DONE:
             return k
-        d = s.buffers.drifted
-        for m in range(offsets[k], offsets[k + 1]):
-            drifted[members[m]] = d[m - offsets[k]]
+        Z = s.buffers
+        for m in range(Z.members.shape[0]):
+            drifted[Z.members[m]] = Z.drifted[m]
         C = S.physical.contacts
-        for m in range(pair_offsets[k], pair_offsets[k + 1]):
-            c = C[m - pair_offsets[k]]
-            engaged[pairs[m]] = c.mode != 0 or c.smooth
+        for p in range(Z.pairs.shape[0]):
+            engaged[Z.pairs[p]] = C[p].mode != 0 or C[p].smooth
     return len(sessions)
 
 
 @jit
-def previews(sessions, span, members, offsets, lin, reach):
-    """Every island's berries on the path its next window of length span starts on (drift.predict), into the
-    scene's lin ((K, N, 3)) and reach ((N, 2)) through members (as `windows` reads them)."""
+def preview(s, span, rows, lin, reach):
+    """Session s's berries on the path a window of length span starts on (drift.predict), into the scene's lin
+    ((K, N, 3)) and reach ((N, 2)) at rows (their scene indices)."""
+    S, Z = s.state, s.buffers
+    predict(S.physical.y, S.integrator.f, s.model, span, Z.work, Z.W.berry, lin, reach, rows)
+
+
+@jit
+def previews(sessions, span, lin, reach):
+    """`preview` of every island, at its berries' rows."""
     for k in range(len(sessions)):
         s = sessions[k]
-        S, Z = s.state, s.buffers
-        predict(S.physical.y, S.integrator.f, s.model, span, Z.work, Z.W.berry, lin, reach,
-                members[offsets[k]:offsets[k + 1]])
+        preview(s, span, s.buffers.members, lin, reach)
+
+
+@jit
+def labels(sessions, label):
+    """label[i] = the index of the island berry i is in."""
+    for k in range(len(sessions)):
+        members = sessions[k].buffers.members
+        for m in range(members.shape[0]):
+            label[members[m]] = k
 
 
 @jit
