@@ -27,8 +27,9 @@ DONE, OUT_FULL, IMPACTS_FULL, MAX_STEPS, STEP_UNDERFLOW, NOT_FINITE, REFUSED = r
 
 class Buffers(NamedTuple):
     """What the loop works in, allocated once per solver rather than on every call (a face calls it every
-    millisecond): the stages' temporaries, the step's samples and the evaluation stages' workspace. Every
-    entry is written before it is read, within one step."""
+    millisecond): the stages' temporaries, the step's samples and the evaluation stages' workspace, each written
+    before it is read within one step; and an island's path, drift and scene indices, which hold for its window
+    (drift.anchor) or its life (handover.form)."""
 
     tmp: np.ndarray      # (ny,) each
     acc: np.ndarray
