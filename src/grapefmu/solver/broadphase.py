@@ -48,10 +48,10 @@ def rebuild(M, contacts, Bk, B, kin, skin):
 
 @jit
 def sample(y0, q, h, M, work, samples):
-    """Fill samples from the step's dense output (stage 1 at every sample point) but the first, θ = 0: y0 itself,
-    whose stage 1 quiet() put there."""
+    """Fill samples from the step's dense output (stage 1 at every sample point) but its ends, which the loop put
+    there: θ = 0, y0 itself, and θ = 1, the step's end (its FSAL stage)."""
     m = model_head(M)  # the head of y: angles, rates and the rachis motion
-    for k in range(1, N_SAMPLES + 1):
+    for k in range(1, N_SAMPLES):
         dense_head(k / N_SAMPLES, y0, q, h, work, m)
         kinematics(work, M, samples[k])
 
@@ -111,13 +111,12 @@ def quiet(y0, q, h, M, contacts, B, cfg, kin, bound, suspect):
     The bound on berry i's travel: its twig end moves at most l (|Δs| + |Δt|) (u is 1-Lipschitz in s and in t),
     and in the world frame also |Δb| + ‖ΔR‖ |p| (‖ΔR‖ ≤ 2 |Δq̂| ≤ 4 |Δq| / |q| for the orientation quaternion q);
     each from travel(). A gap moves at most by the travel of what it separates (|∇δ| ≤ 1 in each position).
-    kin gets stage 1 at the step's start; bound ((N, 2)) each berry's travel in the rachis and the world frame;
+    kin holds stage 1 at the step's start; bound ((N, 2)) each berry's travel in the rachis and the world frame;
     suspect[kk] whether near pair kk can switch on this step (the bound cannot rule it out): the event search looks
     at the suspects alone (every near pair when the list itself is not certified)."""
     nb = M.berry.shape[0]
     world = M.obstacle.shape[0] > 0
     o_bv, o_b, o_om, o_rot = model_offsets(M)[:4]
-    kinematics(y0, M, kin)
     for kk in range(B.count[0]):
         suspect[kk] = True
     base = 0.0

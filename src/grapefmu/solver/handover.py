@@ -72,20 +72,14 @@ def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid
         M.coupling[c] = P.coupling[couplings[c]]
         M.coupling[c].i, M.coupling[c].j = local[M.coupling[c].i], local[M.coupling[c].j]
     y, contacts, book_pair, ring, peak_tension, h, h_contact = G
-    s_bv, s_dh, s_dc, d, _, _ = scene_offsets
-    o_bv, _, _, _, o_dh, o_dc, o_contact, o_work, _ = model_offsets(M)
-    nd = M.n_dof
+    o_contact, o_work = model_offsets(M)[6:8]
+    rows = s.buffers.rows
+    scene_rows(M, members, dofs, couplings, scene_offsets, rows)
     Y = S.physical.y
-    for r in range(dofs.shape[0]):
-        Y[r] = y[dofs[r]]
-        Y[nd + r] = y[d + dofs[r]]
-    for k in range(o_dh - o_bv):
-        Y[o_bv + k] = y[s_bv + k]
+    for r in range(o_contact):
+        Y[r] = y[rows[r]]
     for m in range(members.shape[0]):
-        Y[o_dh + m] = y[s_dh + members[m]]
         S.book.peak_tension[m] = peak_tension[members[m]]
-    for c in range(couplings.shape[0]):
-        Y[o_dc + c] = y[s_dc + couplings[c]]
     Y[o_contact] = 0.0
     Y[o_work] = 0.0
     for p in range(pairs.shape[0]):
@@ -124,28 +118,39 @@ def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid
         R.logged[p] = S.physical.contacts[p]
 
 
-@jit
-def scatter(s, G, members, dofs, pairs, couplings, scene_offsets):
-    """What island session s's state carries back into the scene's G (not its own totals: the caller keeps those)."""
-    S, M = s.state, s.model
-    y, contacts, book_pair, ring, peak_tension, h, h_contact = G
+@inline
+def scene_rows(M, members, dofs, couplings, scene_offsets, rows):
+    """rows[r]: the scene's component of island component r, for every component before the energy ledger (angles,
+    rates, the rachis motion, the hinges' and couplings' dissipation). The one map between the two layouts: form,
+    scatter and retire copy through it."""
     s_bv, s_dh, s_dc, d, _, _ = scene_offsets
     o_bv, _, _, _, o_dh, o_dc, _, _, _ = model_offsets(M)
     nd = M.n_dof
-    Y = S.physical.y
     for r in range(dofs.shape[0]):
-        y[dofs[r]] = Y[r]
-        y[d + dofs[r]] = Y[nd + r]
+        rows[r] = dofs[r]
+        rows[nd + r] = d + dofs[r]
     for k in range(o_dh - o_bv):
-        y[s_bv + k] = Y[o_bv + k]
+        rows[o_bv + k] = s_bv + k
+    for m in range(members.shape[0]):
+        rows[o_dh + m] = s_dh + members[m]
+    for c in range(couplings.shape[0]):
+        rows[o_dc + c] = s_dc + couplings[c]
+
+
+@jit
+def scatter(s, G):
+    """What island session s's state carries back into the scene's G (not its own totals: the caller keeps those)."""
+    S, M, Z = s.state, s.model, s.buffers
+    y, contacts, book_pair, ring, peak_tension, h, h_contact = G
+    rows, members, pairs = Z.rows, Z.members, Z.pairs
+    Y = S.physical.y
+    for r in range(model_offsets(M)[6]):
+        y[rows[r]] = Y[r]
     clk = S.integrator.clock[0]
     for m in range(members.shape[0]):
-        y[s_dh + members[m]] = Y[o_dh + m]
         peak_tension[members[m]] = S.book.peak_tension[m]
         h[members[m]] = clk.h
         h_contact[members[m]] = clk.h_contact
-    for c in range(couplings.shape[0]):
-        y[s_dc + couplings[c]] = Y[o_dc + c]
     for p in range(pairs.shape[0]):
         contacts[pairs[p]] = S.physical.contacts[p]
         book_pair[pairs[p]] = S.book.pair[p]
@@ -153,29 +158,21 @@ def scatter(s, G, members, dofs, pairs, couplings, scene_offsets):
 
 
 @jit
-def retire(s, G, members, dofs, pairs, couplings, scene_offsets, k0, y, accel, totals, later, ledger_later):
+def retire(s, G, scene_offsets, k0, y, accel, totals, later, ledger_later):
     """Island session s's state back into the scene's G (scatter), and what its recorder holds into the run's
     arrays from sample k0 on: y (the scene's layout) and accel, and totals, to which it adds its counts and
     energy integrals and where it raises the peaks. What it closed with holds for every later sample: its totals
     go into `later` and its energy integrals (contacts, work) into `ledger_later`, at the sample after its last
     (the run sums and raises them over the samples after, Islands._assemble)."""
-    scatter(s, G, members, dofs, pairs, couplings, scene_offsets)
-    S, M, R = s.state, s.model, s.scratch
-    s_bv, s_dh, s_dc, d, s_contact, s_work = scene_offsets
-    o_bv, _, _, _, o_dh, o_dc, o_contact, o_work, _ = model_offsets(M)
-    nd = M.n_dof
+    scatter(s, G)
+    S, M, R, rows = s.state, s.model, s.scratch, s.buffers.rows
+    s_contact, s_work = scene_offsets[4:6]
+    o_contact, o_work = model_offsets(M)[6:8]
     r = R.cursor[0].n_out
     for k in range(r):
         row, Y = k0 + k, R.y[k]
-        for a in range(dofs.shape[0]):
-            y[row, dofs[a]] = Y[a]
-            y[row, d + dofs[a]] = Y[nd + a]
-        for b in range(o_dh - o_bv):
-            y[row, s_bv + b] = Y[o_bv + b]
-        for m in range(members.shape[0]):
-            y[row, s_dh + members[m]] = Y[o_dh + m]
-        for c in range(couplings.shape[0]):
-            y[row, s_dc + couplings[c]] = Y[o_dc + c]
+        for a in range(o_contact):
+            y[row, rows[a]] = Y[a]
         y[row, s_contact] += Y[o_contact]
         y[row, s_work] += Y[o_work]
         accel[row, :] = R.accel[k, :]

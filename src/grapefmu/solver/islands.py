@@ -86,14 +86,15 @@ class _System:
 
 
 class _Segment:
-    """One island over the windows it lived through: its berries, pairs and couplings (scene indices), its system,
-    from output sample k0 on, and what it recorded that the run assembles last (its impacts and contact changes;
-    its samples go into the run's arrays when it retires)."""
+    """One island over the windows it lived through: its berries and pairs (scene indices, as Python reads them;
+    its compiled side holds them too, with its map of the scene's components, handover.form), its system, from
+    output sample k0 on, and what it recorded that the run assembles last (its impacts and contact changes; its
+    samples go into the run's arrays when it retires)."""
 
-    __slots__ = ("members", "pairs", "couplings", "dofs", "system", "k0", "impacts", "window", "changes")
+    __slots__ = ("members", "pairs", "system", "k0", "impacts", "window", "changes")
 
-    def __init__(self, members, pairs, couplings, dofs, system, k0):
-        self.members, self.pairs, self.couplings, self.dofs = members, pairs, couplings, dofs
+    def __init__(self, members, pairs, system, k0):
+        self.members, self.pairs = members, pairs
         self.system, self.k0 = system, k0
         self.impacts: list[np.ndarray] = []   # finished impacts of the windows kept
         self.window: list[np.ndarray] = []    # ... of the window in progress
@@ -206,8 +207,8 @@ class Islands:
         """Put a segment's state into the scene's and its samples into the run's arrays, keep its contact changes
         and free its system."""
         system = seg.system
-        retire(system.session, self.G, seg.members, seg.dofs, seg.pairs, seg.couplings, self.scene_offsets, seg.k0,
-               self.y, self.accel, self.totals, self.later, self.ledger_later)
+        retire(system.session, self.G, self.scene_offsets, seg.k0, self.y, self.accel, self.totals, self.later,
+               self.ledger_later)
         done = system.state.book.counters
         self.counters += done.view(np.int64)
         self.berry_steps += len(seg.members) * int(done["steps"][0])
@@ -229,7 +230,7 @@ class Islands:
         form(system.session, w.M, self.G, members, dofs, pairs, couplings, self.local, self.scene_offsets, t, self.t0,
              self.dt, k0)
         self.formed += 1
-        return _Segment(members, pairs, couplings, dofs, system, k0)
+        return _Segment(members, pairs, system, k0)
 
     # --- windows ----------------------------------------------------------------------------------------------
     def _run(self, batch: _Batch, t_w: float) -> None:

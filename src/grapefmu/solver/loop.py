@@ -49,6 +49,7 @@ class Buffers(NamedTuple):
     drifted: np.ndarray  # (N,) or (0,): how far each berry got from them (drift.drift)
     members: np.ndarray  # (N,) or (0,): an island's berries in the scene (handover.form)
     pairs: np.ndarray    # (P,) or (0,): its pairs in the scene
+    rows: np.ndarray     # (ny,) or (0,): the scene's component of each of its own (handover.scene_rows)
 
 
 @jit
@@ -60,7 +61,7 @@ def buffers(M, ny, island):
                    samples_for(M), np.zeros((M.berry.shape[0], 2)), np.ones(p, dtype=np.bool_),
                    np.zeros((M.n_dof + 1 if island else 0, 3)), np.zeros(M.berry.shape[0] if island else 0),
                    np.zeros(M.berry.shape[0] if island else 0, np.int64),
-                   np.zeros(M.pair.shape[0] if island else 0, np.int64))
+                   np.zeros(M.pair.shape[0] if island else 0, np.int64), np.zeros(ny if island else 0, np.int64))
 
 
 @inline
@@ -139,6 +140,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
     fbuf, pwbuf, cls, values = Z.fbuf, Z.pwbuf, Z.cls, Z.values
     nbreak = 0 if inp.held else X.breaks.shape[0]  # a held input has no breakpoints
     steps = 0
+    start_known = False  # whether samples[0] holds the berries at P.y (a whole step's end: the step's FSAL stage)
     while P.t[0] < t_target:
         if steps >= max_steps:
             return MAX_STEPS
@@ -183,9 +185,14 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
                 if clk.h < 1e-15 * max(1.0, abs(t0)) * 16:
                     return STEP_UNDERFLOW if math.isfinite(en) else NOT_FINITE
                 continue
+        # the berries at the step's end are the FSAL stage's: kept before DOP853's extra stages overwrite them
+        copy_kinematics(W.berry, samples[N_SAMPLES])
         dense_coefficients(t0, h, P.y, args, TB, I.stages, I.dense, tmp, acc)
         cnt.rhs_evaluations += TB.c_extra.shape[0]
         q = I.dense
+        if not start_known:
+            kinematics(P.y, M, samples[0])
+            start_known = True
         # --- broad phase, then the earliest contact switch inside the step: none to look for on a quiet step
         far = quiet(P.y, q, h, M, C, B, cfg, samples[0], Z.travel, Z.suspect) if npair > 0 else 0.0
         sampled = far < 0.0
@@ -216,6 +223,8 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
             dense(theta_e, I.y_prev, q, h, P.y)
         else:
             P.y[:] = ynew
+            copy_kinematics(samples[N_SAMPLES], samples[0])
+        start_known = not event
         clk.t_prev = t0
         clk.h_last = h
         P.t[0] = t_commit
@@ -249,6 +258,13 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
                     clk.h = min(clk.h, clk.h_contact)
                 clk.after_onset = True
     return DONE
+
+
+@inline
+def copy_kinematics(source, target):
+    """target[:] = source, record by record ((N,) KINEMATICS)."""
+    for i in range(source.shape[0]):
+        target[i] = source[i]
 
 
 @jit

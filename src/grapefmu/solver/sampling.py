@@ -62,7 +62,8 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
     """Book the step up to θ = theta_end.
 
     Every berry's pedicel tension is sampled at θ = k / N_SAMPLES inside the committed part (its end is the next
-    step's first sample): on the berries the broad phase sampled there (`sampled`), else (a quiet step) on its own.
+    step's first sample): on the berries the broad phase sampled there (`sampled`), else (a quiet step) on its own
+    but at the step's ends, which the loop keeps in samples.
     The active pairs' forces, for the quadrature and the peak, are sampled on N_SAMPLES + 1 points of the committed
     part: on a whole step the same points, on a step an event cut short each pair on its own (pair_at), so a
     cluster's event step evaluates the pairs in contact and not every berry again."""
@@ -75,7 +76,8 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
         if not whole and k > 0 and th >= theta_end:
             break
         acc = applied_accel(X, inp, t0 + th * h, t0)
-        if sampled:
+        given = sampled or k == 0 or k == N_SAMPLES  # the loop keeps a step's ends in samples
+        if given:
             at = samples[k]
             dense_rachis(th, y0, q, h, work, M)
             fr = rachis_frame(work, M)
@@ -92,7 +94,7 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
                 fbuf[k, kk] = W.pair[kk].force
                 pwbuf[k, kk] = W.pair[kk].power
                 if contacts[p].smooth:
-                    if sampled:
+                    if given:
                         dense_pair(th, y0, q, h, work, M, M.pair[p])
                     cls[k, kk] = classify(p, work, M, contacts, at, contacts[p].mode)[0]
         for i in range(berry.shape[0]):

@@ -173,11 +173,6 @@ def _names(cls=SolverState, prefix: str = ""):
         yield from _names(sub, f"{prefix}{f}.") if sub else (prefix + f,)
 
 
-def _build(cls, arrays):
-    """The state (or group) cls from an iterator over its arrays in _names' order."""
-    return cls(*[_build(_GROUPS[f], arrays) if f in _GROUPS else next(arrays) for f in cls._fields])
-
-
 _NAMES = tuple(_names())
 
 
@@ -215,7 +210,7 @@ def zeros(ny: int, npair: int, n: int, stages: int, k: int, zeno_max: int) -> tu
     dtype, words = _dtype(ny, npair, n, stages, k, zeno_max)
     memory = np.zeros(words, np.uint64)
     whole = memory.view(dtype)
-    return memory, _build(SolverState, (whole[name][0] for name in _NAMES))
+    return memory, unflatten({name: whole[name][0] for name in _NAMES})
 
 
 def _bytes(a: np.ndarray) -> np.ndarray:
