@@ -2,7 +2,9 @@
 each stage of `loop.integrate` called alone in a compiled loop from one mid-run state (the scene run to 30 % of
 its end), so that its arithmetic is timed without the rest of the step. The minimum of 7 repeats of n calls.
 A stage alone runs with warm caches and learned branches: the sum is a lower bound on a step inside the loop
-(benchmarks/run_breakdown.py measures the loop itself).
+(benchmarks/run_breakdown.py measures the loop itself). The samples are filled first as the loop fills them (the
+step's ends by the loop, the inner points by the broad phase); kinematics is not part of the certificate since
+the loop hands the step's start to it.
 Run: .venv/bin/python benchmarks/step_stages.py [collision | cluster N] [rtol]"""
 from __future__ import annotations
 
@@ -15,7 +17,8 @@ from grapefmu.bench.scale import scene as scale_scene
 from grapefmu.bench.scenes import bench_scenes, build
 from grapefmu.physics.dynamics import rhs
 from grapefmu.physics.kinematics import kinematics
-from grapefmu.solver.broadphase import quiet
+from grapefmu.solver.broadphase import quiet, sample
+from grapefmu.solver.events import N_SAMPLES
 from grapefmu.solver.loop import buffers
 from grapefmu.solver.sampling import sample_step
 from grapefmu.solver.solver import Solver
@@ -95,6 +98,10 @@ def main(argv: list[str]) -> None:
     s.run(t_end=0.3 * sc.solver.t_end)  # the stages below write only scratch, the dense output and peaks
     M, X, TB, S, config, Z = s.M, s.excitation, s.tableau, s.state, s.config, buffers(s.M, s.layout.size, False)
     h = float(S.integrator.clock["h_last"][0])
+    # the step's samples as the loop leaves them: its ends (the loop's) and the inner points (the broad phase's)
+    kinematics(S.physical.y, M, Z.samples[0])
+    kinematics(S.physical.y + h * S.integrator.dense.sum(axis=1), M, Z.samples[N_SAMPLES])
+    sample(S.physical.y, S.integrator.dense, h, M, Z.work, Z.samples)
     n = max(200, int(2e5 / sc.model.n_berries))
     print(f"{name}, rtol {rtol:g}: {sc.model.n_berries} berries, {S.physical.y.shape[0]} state components, "
           f"{S.integrator.stages.shape[0]} stages, {int(S.broad_phase.count[0])} near pairs; minimum of 7 × {n} calls")
