@@ -2,11 +2,13 @@
 goes, and tight where the sum of the power coefficients' magnitudes is not."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from grapefmu.solver.broadphase import travel
+from grapefmu.solver.broadphase import BERNSTEIN, travel
 from grapefmu.solver.drift import off_path
-from grapefmu.solver.tableau import DOP853
+from grapefmu.solver.tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5
 
 
 def test_travel_bounds_the_dense_output_and_is_tight():
@@ -42,3 +44,14 @@ def test_the_drift_bound_covers_the_distance_from_the_extrapolated_path():
             bound = off_path(q, h, 0, e0, c1, c2)
             assert np.abs(off).max() <= bound * (1 + 1e-12) + 1e-300
             assert bound <= (abs(e0) + h * np.abs(q).sum() + abs(c1) + abs(c2)) * (1 + 1e-12)
+
+
+def test_the_bernstein_weights_are_the_binomial_ratios_for_every_dense_output():
+    """The table the bounds read (broadphase.BERNSTEIN) against C(i, m) / C(n, m) from math.comb, for every degree a
+    tableau's dense output has."""
+    for tableau in (BOGACKI_SHAMPINE, DOPRI5, DOP853):
+        assert tableau.p.shape[1] < BERNSTEIN.shape[0]
+    for n in range(1, BERNSTEIN.shape[0]):
+        for i in range(1, n + 1):
+            for m in range(1, i + 1):
+                assert math.isclose(BERNSTEIN[n, i, m], math.comb(i, m) / math.comb(n, m), rel_tol=1e-14)

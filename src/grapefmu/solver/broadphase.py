@@ -90,15 +90,30 @@ def travel(q, h, r):
     return h * worst
 
 
+def _bernstein_weights(degree: int) -> np.ndarray:
+    """W[n, i, m] = C(i, m) / C(n, m) for 1 ≤ m ≤ i ≤ n ≤ degree, as the running product Π_(k ≤ m) (i − k + 1) /
+    (n − k + 1): a table, because that chain of divisions, on every angle of every step, was most of quiet()."""
+    w = np.zeros((degree + 1, degree + 1, degree + 1))
+    for n in range(1, degree + 1):
+        for i in range(1, n + 1):
+            c = 1.0
+            for m in range(1, i + 1):
+                c *= (i - m + 1) / (n - m + 1)
+                w[n, i, m] = c
+    return w
+
+
+#: for dense outputs of degree up to 8 (DOP853's is 7: Q has 7 columns)
+BERNSTEIN = _bernstein_weights(8)
+
+
 @inline
 def bernstein(q, r, i):
     """Σ_(m ≤ i) C(i, m) / C(n, m) Q[r, m − 1]: the i-th Bernstein coefficient of Σ_j Q[r, j] θ^(j+1), degree n."""
-    n = q.shape[1]
+    w = BERNSTEIN[q.shape[1], i]
     b = 0.0
-    c = 1.0
     for m in range(1, i + 1):
-        c *= (i - m + 1) / (n - m + 1)
-        b += c * q[r, m - 1]
+        b += w[m] * q[r, m - 1]
     return b
 
 
