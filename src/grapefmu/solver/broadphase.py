@@ -92,7 +92,7 @@ def travel(q, h, r):
 
 def _bernstein_weights(degree: int) -> np.ndarray:
     """W[n, i, m] = C(i, m) / C(n, m) for 1 ≤ m ≤ i ≤ n ≤ degree, as the running product Π_(k ≤ m) (i − k + 1) /
-    (n − k + 1): a table, because that chain of divisions, on every angle of every step, was most of quiet()."""
+    (n − k + 1): a table, because that chain of divisions, on every angle of every step, took a third of quiet()."""
     w = np.zeros((degree + 1, degree + 1, degree + 1))
     for n in range(1, degree + 1):
         for i in range(1, n + 1):
