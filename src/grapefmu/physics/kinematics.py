@@ -112,19 +112,43 @@ def workspace(M) -> Workspace:
                      np.zeros(M.pair.shape[0], dtype=PAIR_FORCE), np.zeros(M.coupling.shape[0]))
 
 
+#: sin and cos from a table on a grid of 1/16 rad over |x| ≤ 16 rad (`sincos`)
+TRIG_GRID = 16.0
+TRIG_POINTS = 256
+TRIG = np.array([(math.sin(k / TRIG_GRID), math.cos(k / TRIG_GRID)) for k in range(-TRIG_POINTS, TRIG_POINTS + 1)])
+
+
+@inline
+def sincos(x):
+    """(sin x, cos x) to within 2.5e-16: x = g + d with g the nearest point of TRIG's grid and |d| ≤ 1/32, then
+    sin x = sin g cos d + cos g sin d by Taylor series in d whose first terms left out are below 1e-19 (libm
+    beyond the table, and for NaN). A pure function of x, so results do not depend on what was evaluated
+    before. Every angle on every stage and sample passes here: libm's sincos (11 ns against 6) was a quarter of
+    a 100-berry cluster's run."""
+    if abs(x) <= TRIG_POINTS / TRIG_GRID:
+        i = int(x * TRIG_GRID + (TRIG_POINTS + 0.5))  # the nearest point's index: the sum is > 0, int() floors it
+        d = x - (i - TRIG_POINTS) * (1.0 / TRIG_GRID)  # exact where x is within a factor 2 of it
+        sg, cg = TRIG[i, 0], TRIG[i, 1]
+        d2 = d * d
+        sd = d + d * d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0)))
+        cd = 1.0 + d2 * (-0.5 + d2 * (1.0 / 24.0 + d2 * (-1.0 / 720.0 + d2 * (1.0 / 40320.0))))
+        return sg * cd + cg * sd, cg * cd - sg * sd
+    return math.sin(x), math.cos(x)
+
+
 @inline
 def berry_kinematics(b, k, s, sd, t, td, fr):
     """§1 for berry b (a BERRY record): trig, u, u̇, p and ṗ into k (a KINEMATICS record) from its swing s,
     tilt t (ignored for a planar berry: t and ṫ are then any numbers) and their rates, and the world frame's
     x = b + R p, ẋ = ḃ + R (ω × p + ṗ) from the rachis frame fr (a Frame). Records and numbers only: an array
     handed to an inlined function costs two reference counts per call."""
-    ss, cs = math.sin(s), math.cos(s)
+    ss, cs = sincos(s)
     if b.n_angles == 1:
         st, ct = 0.0, 1.0
         ux, uy, uz = ss, 0.0, -cs
         vx, vy, vz = cs * sd, 0.0, ss * sd
     else:
-        st, ct = math.sin(t), math.cos(t)
+        st, ct = sincos(t)
         lx, ly, uz = ss, -st * cs, -ct * cs
         wx, wy, vz = cs * sd, st * ss * sd - ct * cs * td, ct * ss * sd + st * cs * td
         ca, sa = b.azimuth_cos, b.azimuth_sin
