@@ -1,7 +1,7 @@
 """Multirate islands against one step size (issue 14 item 4; docs/solver.md "Multirate islands"): for the Scale
 section's cluster (pick-and-place, rtol 1e-6, 1 s) at each N and window, interleaved, the minimum of a few runs:
-wall time both ways, the islands' compiled work alone (`session.windows`), berry-steps (each island's steps × its
-berries, against steps × N), islands formed and rolled back, and their mean size; then what one step of a
+wall time both ways, the islands' compiled work alone (`session.windows`), the systems made (islands of a shape
+not seen before in the run: their Python), berry-steps (each island's steps × its berries, against steps × N), islands formed and rolled back, and their mean size; then what one step of a
 one-berry island costs against a berry-step of the whole cluster.
 Run: .venv/bin/python benchmarks/islands.py [N ...] [--windows 0.01 0.02 0.04] [--repeats 3] [--join 5e-4] [--stay 5e-3]"""
 from __future__ import annotations
@@ -18,6 +18,15 @@ from grapefmu.solver import session as ses
 
 compiled = [0.0]
 _windows = ses.windows
+made = [0.0, 0]  # systems made (islands of a shape not seen before in the run): seconds, count
+_System_init = isl._System.__init__
+
+
+def timed_system(self, *args):
+    t = time.perf_counter()
+    _System_init(self, *args)
+    made[0] += time.perf_counter() - t
+    made[1] += 1
 
 
 def timed_windows(*args):
@@ -37,6 +46,7 @@ def main() -> None:
     a = ap.parse_args()
     isl.JOIN, isl.STAY = a.join, a.stay
     isl.ses.windows = timed_windows
+    isl._System.__init__ = timed_system
     for n in a.sizes:
         sc = scene("cluster", n)
         whole = grapefmu.simulate(sc)
@@ -48,21 +58,22 @@ def main() -> None:
             best["whole"] = min(best["whole"], time.perf_counter() - t)
             for w in a.windows:
                 compiled[0] = 0.0
+                made[:] = [0.0, 0]
                 it = isl.Islands(sc, window=w)
                 t = time.perf_counter()
                 run = it.run()
                 wall = time.perf_counter() - t
                 if wall < best[w][0]:
                     sizes = [len(s.members) for s in it.segments]
-                    best[w] = (wall, compiled[0], it.berry_steps, it.formed, it.rollbacks, float(np.mean(sizes)))
+                    best[w] = (wall, compiled[0], it.berry_steps, it.formed, it.rollbacks, float(np.mean(sizes)), made[0], made[1])
         print(f"{n}-berry cluster, 1 s: one step size {1e3 * best['whole']:.1f} ms, {whole.stats['steps'] * n} "
               f"berry-steps")
         for w in a.windows:
-            wall, work, steps, formed, back, size = best[w]
+            wall, work, steps, formed, back, size, made_s, n_made = best[w]
             print(f"  islands, window {1e3 * w:g} ms: {1e3 * wall:.1f} ms ({wall / best['whole']:.2f}× one step "
                   f"size), compiled {1e3 * work:.1f} ms ({work / best['whole']:.2f}×), {steps} berry-steps "
                   f"({whole.stats['steps'] * n / steps:.1f}× fewer), {formed} formed ({size:.1f} berries on average), "
-                  f"{back} rolled back")
+                  f"{back} rolled back; {n_made} systems made, {1e3 * made_s:.1f} ms")
     # one step of a one-berry island against a berry-step of the whole 100-berry cluster
     sc = scene("cluster", 100)
     it = isl.Islands(sc)
