@@ -79,12 +79,12 @@ def main() -> None:
     it = isl.Islands(sc)
     it.run(0.05)
     seg = next(s for s in it.batch.segs if len(s.members) == 1)
-    system = seg.system
-    system.rec.cursor["grid_dt"] = 0.0  # no output samples: the steps alone
-    before = int(system.state.book.counters["steps"][0])
+    state, rec = ses.views(seg.system.session)
+    rec.cursor["grid_dt"] = 0.0  # no output samples: the steps alone
+    before = int(state.book.counters["steps"][0])
     t = time.perf_counter()
-    it._run(isl._Batch([seg], it.n), system.state.physical.t[0] + 200.0)  # the move is over: a free swing
-    per = (time.perf_counter() - t) / (int(system.state.book.counters["steps"][0]) - before)
+    it._run(isl._Batch([seg], it.n), state.physical.t[0] + 200.0)  # the move is over: a free swing
+    per = (time.perf_counter() - t) / (int(state.book.counters["steps"][0]) - before)
     run = grapefmu.simulate(sc)
     t = time.perf_counter()
     grapefmu.simulate(sc)

@@ -16,6 +16,10 @@ from ..physics.compiled import inline, jit
 from ..physics.layout import model_offsets
 from ..results.records import COUNTS, PEAKS
 from .solver import restart
+from .state import BOOK_COUNTERS
+
+#: the work counters' names (BOOK_COUNTERS), for literal_unroll
+WORK = tuple(BOOK_COUNTERS.names)
 
 
 @jit
@@ -158,13 +162,17 @@ def scatter(s, G):
 
 
 @jit
-def retire(s, G, scene_offsets, k0, y, accel, totals, later, ledger_later):
+def retire(s, G, scene_offsets, k0, y, accel, totals, later, ledger_later, counters):
     """Island session s's state back into the scene's G (scatter), and what its recorder holds into the run's
     arrays from sample k0 on: y (the scene's layout) and accel, and totals, to which it adds its counts and
     energy integrals and where it raises the peaks. What it closed with holds for every later sample: its totals
     go into `later` and its energy integrals (contacts, work) into `ledger_later`, at the sample after its last
-    (the run sums and raises them over the samples after, Islands._assemble)."""
+    (the run sums and raises them over the samples after, Islands._assemble). Its work counters are added to
+    `counters` ((1,) BOOK_COUNTERS). Returns its contact changes (a copy) and its steps."""
     scatter(s, G)
+    done, c = s.state.book.counters[0], counters[0]
+    for f in literal_unroll(WORK):
+        c[f] += done[f]
     S, M, R, rows = s.state, s.model, s.scratch, s.buffers.rows
     s_contact, s_work = scene_offsets[4:6]
     o_contact, o_work = model_offsets(M)[6:8]
@@ -181,6 +189,7 @@ def retire(s, G, scene_offsets, k0, y, accel, totals, later, ledger_later):
     Y = S.physical.y
     ledger_later[k0 + r, 0] += Y[o_contact]
     ledger_later[k0 + r, 1] += Y[o_work]
+    return R.changes[:R.cursor[0].n_changes].copy(), done.steps
 
 
 @inline

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..errors import SolverError
 from ..model.model import Scene, islands_refusal
-from ..physics.layout import layout, layout_of
+from ..physics.layout import layout_of
 from ..results.contacts import ContactLog
 from ..results.impacts import Impacts
 from ..results.records import COUNTS, IMPACT, PEAKS, TOTALS, concat
@@ -50,39 +50,16 @@ ROWS = 4096
 
 
 class _System:
-    """An island's compiled side: its model (room for the scene's rows of its berries, pairs and couplings), state
-    in one buffer with its backup, recorder and session (session.island). Built once per shape (berries, angles,
-    couplings, pairs) and loaded with an island's berries in place (handover.form): until then its model and state
-    hold no island's values."""
+    """An island's compiled side, made in compiled code (session.island): its model (room for the scene's rows of its
+    berries, pairs and couplings), state in one buffer with its backup, recorder and loop buffers, all in one
+    session. Built once per shape (berries, angles, couplings, pairs) and loaded with an island's berries in place
+    (handover.form): until then its model and state hold no island's values."""
 
-    __slots__ = ("M", "layout", "state", "memory", "backup", "parent", "rec", "session")
+    __slots__ = ("shape", "session")
 
     def __init__(self, parent: Solver, n: int, n_dof: int, n_couplings: int, n_pairs: int, rows: int):
-        M = parent.M
-        self.M = M._replace(berry=np.zeros(n, M.berry.dtype), pair=np.zeros(n_pairs, M.pair.dtype),
-                            coupling=np.zeros(n_couplings, M.coupling.dtype), n_dof=n_dof)
-        self.layout = lay = layout(n, n_dof, n_couplings, M.turning)
-        # zeros, not a Solver's blank state: form writes every value an island reads
-        self.memory, self.state = st.zeros(lay.size, n_pairs, n, *parent.tableau.p.shape, parent.state.book.ring.shape[1])
-        self.backup = np.zeros_like(self.memory)
-        self.parent = parent
-        self.rec = st.recorder(rows, lay.size, n_pairs, max(n_pairs, 1) * 64)
-        self.session = self._session()
-
-    def _session(self) -> ses.Session:
-        return ses.island(self.parent._session, self.M, self.state, self.rec, self.memory, self.backup)
-
-    def grow(self) -> None:
-        """Twice the room in the recorder (samples and contact changes)."""
-        old = self.rec
-        n, nc = int(old.cursor["n_out"][0]), int(old.cursor["n_changes"][0])
-        self.rec = st.Recorder(*(np.empty((2 * a.shape[0],) + a.shape[1:], a.dtype) for a in old[:st.SAMPLED]),
-                               np.empty(2 * old.changes.shape[0], old.changes.dtype), old.logged, old.impacts,
-                               old.cursor)
-        for a, b in zip(self.rec[:st.SAMPLED], old[:st.SAMPLED]):
-            a[:n] = b[:n]
-        self.rec.changes[:nc] = old.changes[:nc]
-        self.session = self._session()
+        self.shape = (n, n_dof, n_couplings, n_pairs)
+        self.session = ses.island(parent._session, n, n_dof, n_couplings, n_pairs, rows)
 
 
 class _Segment:
@@ -145,11 +122,6 @@ class _Batch:
         if ran is not None:
             self.saved[:] = before[[where_before[id(seg)] for seg in self.segs]]
 
-    def grow(self, k: int) -> None:
-        """Twice the room in island k's recorder."""
-        system = self.segs[k].system
-        system.grow()
-        ses.put(self.sessions, k, system.session)
 
 
 class Islands:
@@ -199,7 +171,7 @@ class Islands:
         for f in PEAKS:
             self.later[f] = -np.inf
         self.ledger_later = np.zeros((n + 1, 2))
-        self.counters = np.zeros(len(st.BOOK_COUNTERS.names), dtype=np.int64)
+        self.counters = np.zeros(1, dtype=st.BOOK_COUNTERS)
         self.segments: list[_Segment] = []
         self.formed = self.rollbacks = self.berry_steps = 0
 
@@ -207,17 +179,13 @@ class Islands:
         """Put a segment's state into the scene's and its samples into the run's arrays, keep its contact changes
         and free its system."""
         system = seg.system
-        retire(system.session, self.G, self.scene_offsets, seg.k0, self.y, self.accel, self.totals, self.later,
-               self.ledger_later)
-        done = system.state.book.counters
-        self.counters += done.view(np.int64)
-        self.berry_steps += len(seg.members) * int(done["steps"][0])
-        rec = system.rec
-        seg.changes = rec.changes[:int(rec.cursor["n_changes"][0])].copy()
+        seg.changes, steps = retire(system.session, self.G, self.scene_offsets, seg.k0, self.y, self.accel,
+                                    self.totals, self.later, self.ledger_later, self.counters)
+        self.berry_steps += len(seg.members) * steps
         seg.impacts += seg.window
         seg.window = []
         self.segments.append(seg)
-        self.free.setdefault(system.layout[:3] + (len(seg.pairs),), []).append(system)
+        self.free.setdefault(system.shape, []).append(system)
 
     def _form(self, members: np.ndarray, t: float, k0: int) -> _Segment:
         """An island of these berries (ascending) at time t, from the scene's state, recording from sample k0."""
@@ -244,18 +212,17 @@ class Islands:
                             self.drifted, self.engaged)
             for m in np.flatnonzero(batch.n_impacts):
                 seg = batch.segs[m]
-                seg.window.append(seg.system.rec.impacts[:batch.n_impacts[m]].copy())
-                seg.system.rec.cursor["n_impacts"] = 0
+                seg.window.append(ses.take_impacts(seg.system.session))
                 self.pending.add(seg)
             if k == len(batch.segs):
                 return
-            status, seg = batch.status[k], batch.segs[k]
+            status, s = batch.status[k], batch.segs[k].system.session
             fresh[k] = False
             if status == OUT_FULL:
-                batch.grow(k)
+                ses.grow(s)
             elif status != IMPACTS_FULL:
-                t = seg.system.state.physical.t[0]
-                seg.system.memory[:] = seg.system.backup
+                t = ses.views(s)[0].physical.t[0]
+                ses.rollback(s, batch.saved[k])
                 raise SolverError(f"integration stopped at t = {t:.9g} s: {STATUS_TEXT.get(status, f'status {status}')}")
 
     def _slack(self, span: float) -> np.ndarray:
@@ -324,8 +291,7 @@ class Islands:
             for members in groups.values():
                 for m in members:
                     seg = b.segs[m]
-                    seg.system.memory[:] = seg.system.backup
-                    seg.system.rec.cursor[:] = b.saved[m]
+                    ses.rollback(seg.system.session, b.saved[m])
                     seg.window = []
                     self._retire(seg)
                     out.append(seg)
@@ -394,8 +360,7 @@ class Islands:
         log = ContactLog(self.contacts0, changes[np.argsort(changes["sample"], kind="stable")])
         impacts = concat(finished) if finished else np.zeros(0, dtype=IMPACT)
         impacts = impacts[np.argsort(impacts["end"], kind="stable")]
-        counters = self.counters.view(st.BOOK_COUNTERS)
-        stats = run_stats(counters, totals[-1:], lay, len(self.scene.model.pairs))
+        stats = run_stats(self.counters, totals[-1:], lay, len(self.scene.model.pairs))
         stats |= {"wall_time": wall, "method": "event", "t_start": self.t0, "rtol": self.whole.rtol,
                   "atol": self.whole.atol, "fixed_step": self.whole.fixed_step, "islands_formed": self.formed,
                   "island_rollbacks": self.rollbacks, "window": self.window}

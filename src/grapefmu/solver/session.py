@@ -7,23 +7,26 @@ all once, and `advance` takes it as a single argument. The state's arrays are vi
 """
 from __future__ import annotations
 
+import numpy as np
 from numba.core import types
 from numba.experimental import structref
 from numba.extending import overload
 from numba.typed import List
 
 from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
+from ..model.model import BERRY, COUPLING, PAIR, ModelArrays
 from ..physics.compiled import jit
 from ..physics.dynamics import rhs
 from ..physics.excitation import applied_accel
-from ..physics.layout import model_offsets
+from ..physics.layout import model_offsets, offsets
 from ..physics.kinematics import workspace
 from ..physics.observe import observe
 from .drift import anchor, predict
 from .loop import DONE, REFUSED, buffers, integrate
+from .state import CHANGE, TOTALS, Recorder, recorder, zeros
 
-__all__ = ["Session", "advance", "derivative", "island", "labels", "listed", "new", "preview", "previews", "put",
-           "refresh", "resume", "run", "take_last", "windows"]
+__all__ = ["Session", "advance", "derivative", "grow", "island", "labels", "listed", "new", "preview", "previews",
+           "put", "refresh", "resume", "rollback", "run", "take_impacts", "take_last", "views", "windows"]
 
 
 @structref.register
@@ -69,12 +72,63 @@ def new(model, excitation, tableau, config, state, scratch, memory, backup, now)
 
 
 @jit
-def island(template, model, state, scratch, memory, backup):
-    """A Session for an island of the scene whose Session is `template`: the scene's excitation, tableau and settings,
-    the island's own model, state (views on memory), backup and recorder, and loop buffers made here. An island is
-    never refreshed (its Run is assembled from its recorder), so it shares the template's `now`."""
-    return _new(model, template.excitation, template.tableau, template.config, state, scratch,
-                buffers(model, state.physical.y.shape[0], True), memory, backup, template.now)
+def island(template, n, n_dof, n_couplings, n_pairs, rows):
+    """A Session for an island of n berries (n_dof angles, n_couplings couplings, n_pairs pairs) of the scene whose
+    Session is `template`: the scene's excitation, tableau, settings and obstacles; a model of zeros with room for
+    the island's rows (handover.form fills them), a state of zeros with its backup, a recorder of `rows` samples
+    and the loop's buffers, all made here (in Python they cost more than an island's window). An island is never
+    refreshed (its Run is assembled from its recorder), so it shares the template's `now`."""
+    P = template.model
+    M = ModelArrays(np.zeros(n, BERRY), np.zeros(n_pairs, PAIR), np.zeros(n_couplings, COUPLING), P.obstacle,
+                    P.gravity, n_dof, P.turning)
+    ny = offsets(n, n_dof, n_couplings, P.turning)[-1]
+    p, ring = template.tableau.p, template.state.book.ring
+    memory, state = zeros(ny, n_pairs, n, p.shape[0], p.shape[1], ring.shape[1])
+    scratch = recorder(rows, ny, n_pairs, max(n_pairs, 1) * 64)
+    return _new(M, template.excitation, template.tableau, template.config, state, scratch,
+                buffers(M, ny, True), memory, np.zeros_like(memory), template.now)
+
+
+@jit
+def grow(s):
+    """Twice the room in island session s's recorder (samples and contact changes), what it holds kept."""
+    old = s.scratch
+    cur = old.cursor[0]
+    rows, n, nc = 2 * old.t.shape[0], cur.n_out, cur.n_changes
+    t, y = np.empty(rows), np.empty((rows, old.y.shape[1]))
+    accel, totals = np.empty((rows, 6)), np.empty(rows, TOTALS)
+    changes = np.empty(2 * old.changes.shape[0], CHANGE)
+    t[:n] = old.t[:n]
+    y[:n] = old.y[:n]
+    accel[:n] = old.accel[:n]
+    totals[:n] = old.totals[:n]
+    changes[:nc] = old.changes[:nc]
+    s.scratch = Recorder(t, y, accel, totals, changes, old.logged, old.impacts, old.cursor)
+
+
+@jit
+def take_impacts(s):
+    """The finished impacts in session s's recorder, copied, and the recorder's list emptied."""
+    R = s.scratch
+    out = R.impacts[:R.cursor[0].n_impacts].copy()
+    R.cursor[0].n_impacts = 0
+    return out
+
+
+@jit
+def rollback(s, saved):
+    """Session s back to its last save: its state from the backup, its recorder's cursor from `saved` (a CURSOR
+    record, windows' saved[k])."""
+    s.memory[:] = s.backup
+    cur = s.scratch.cursor[0]
+    cur.grid_t0, cur.grid_dt, cur.grid_k, cur.n_out = saved.grid_t0, saved.grid_dt, saved.grid_k, saved.n_out
+    cur.n_impacts, cur.n_changes = saved.n_impacts, saved.n_changes
+
+
+@jit
+def views(s):
+    """(state, recorder) of session s as Python reads them (views, not copies): for callers that inspect an island."""
+    return s.state, s.scratch
 
 
 @jit

@@ -6,13 +6,12 @@ write in place); per-pair and per-berry quantities are named arrays.
 """
 from __future__ import annotations
 
-import functools
-import math
 from typing import NamedTuple
 
 import numpy as np
 
 from ..errors import StateError
+from ..physics.compiled import inline, jit
 from ..physics.excitation import INPUT
 from ..physics.forces import CONTACT
 from ..results.contacts import CHANGE
@@ -114,7 +113,8 @@ class Recorder(NamedTuple):
 SAMPLED = 4
 
 
-def recorder(cap: int, ny: int, npair: int, cap_impacts: int) -> Recorder:
+@jit
+def recorder(cap, ny, npair, cap_impacts):
     """Rows are read only up to the cursor's counts, each written whole before (record_grid, switch_pair): left
     uninitialised, as zero-filling a run's worth of structured rows cost more than a short run's steps."""
     return Recorder(np.empty(cap), np.empty((cap, ny)), np.empty((cap, 6)), np.empty(cap, dtype=TOTALS),
@@ -166,51 +166,46 @@ def copy(state: SolverState) -> SolverState:
         BroadPhase(B.near.copy(), B.count.copy(), B.reference.copy()), state.fingerprint.copy())
 
 
-def _names(cls=SolverState, prefix: str = ""):
-    """flatten's dotted names in its order, from the classes alone."""
-    for f in cls._fields:
-        sub = _GROUPS.get(f)
-        yield from _names(sub, f"{prefix}{f}.") if sub else (prefix + f,)
+#: bytes per record of the state's record arrays (numba reads a dtype's size only as a number)
+_CONTACT_B, _INPUT_B, _CLOCK_B = CONTACT.itemsize, INPUT.itemsize, CLOCK.itemsize
+_COUNTERS_B, _TOTALS_B, _BOOK_PAIR_B = BOOK_COUNTERS.itemsize, TOTALS.itemsize, BOOK_PAIR.itemsize
 
 
-_NAMES = tuple(_names())
+@inline
+def _field(memory, at, nbytes):
+    """nbytes of memory from 8-byte word `at` on, as bytes to view."""
+    return memory[at:at + (nbytes + 7) // 8].view(np.uint8)[:nbytes]
 
 
-@functools.lru_cache(maxsize=256)
-def _dtype(ny: int, npair: int, n: int, stages: int, k: int, zeno_max: int):
-    """The buffer of a state of these sizes as one record: each array a field (a sub-array: its shape and dtype)
-    at its byte offset, in flatten's order, each 16-byte aligned; and the buffer's size in 8-byte words (+ 2: an
-    empty array may sit at the very end). Its fields are the state's views in one pass (numpy builds a view from
-    a field twice as fast as from a buffer and an offset)."""
-    f8 = np.float64
-    shapes = {"physical.t": ((1,), f8), "physical.y": ((ny,), f8), "physical.contacts": ((npair,), CONTACT),
-              "input": ((1,), INPUT),
-              "integrator.f": ((ny,), f8), "integrator.y_prev": ((ny,), f8), "integrator.stages": ((stages, ny), f8),
-              "integrator.dense": ((ny, k), f8), "integrator.clock": ((1,), CLOCK),
-              "book.counters": ((1,), BOOK_COUNTERS), "book.totals": ((1,), TOTALS), "book.pair": ((npair,), BOOK_PAIR),
-              "book.peak_tension": ((n,), f8), "book.ring": ((npair, zeno_max), f8),
-              "broad_phase.near": ((npair,), np.int64), "broad_phase.count": ((1,), np.int64),
-              "broad_phase.reference": ((n, 6), f8),
-              "fingerprint": ((1,), np.uint64)}
-    formats, offsets, at = [], [], 0
-    for name in _NAMES:
-        shape, dtype = shapes[name]
-        at = -(-at // 16) * 16
-        formats.append((dtype, shape))
-        offsets.append(at)
-        at += math.prod(shape) * np.dtype(dtype).itemsize
-    words = at // 8 + 2
-    return np.dtype({"names": _NAMES, "formats": formats, "offsets": offsets, "itemsize": 8 * words}), words
-
-
-def zeros(ny: int, npair: int, n: int, stages: int, k: int, zeno_max: int) -> tuple[np.ndarray, SolverState]:
+@jit
+def zeros(ny, npair, n, stages, k, zeno_max):
     """A state of zeros for ny state variables, npair pairs, n berries, a method of `stages` stages and k dense
     coefficients, as views on one buffer of 8-byte words (returned first): saving the state before a step and
-    restoring it after a failure are then one copy of the buffer."""
-    dtype, words = _dtype(ny, npair, n, stages, k, zeno_max)
-    memory = np.zeros(words, np.uint64)
-    whole = memory.view(dtype)
-    return memory, unflatten({name: whole[name][0] for name in _NAMES})
+    restoring it after a failure are then one copy of the buffer. Each array starts on a 16-byte boundary, in
+    flatten's order; two spare words at the end (an empty array may sit there). Compiled, so that an island's
+    state is made where its session is (session.island), never passing through Python."""
+    nbytes = (8, 8 * ny, npair * _CONTACT_B, _INPUT_B, 8 * ny, 8 * ny, 8 * stages * ny, 8 * ny * k, _CLOCK_B,
+              _COUNTERS_B, _TOTALS_B, npair * _BOOK_PAIR_B, 8 * n, 8 * npair * zeno_max, 8 * npair, 8, 48 * n, 8)
+    at = np.empty(len(nbytes), np.int64)
+    end = 0
+    for i in range(len(nbytes)):
+        at[i] = (end + 1) // 2 * 2
+        end = at[i] + (nbytes[i] + 7) // 8
+    memory = np.zeros(end + 2, np.uint64)
+    m, f = memory, np.float64
+    return memory, SolverState(
+        Physical(_field(m, at[0], nbytes[0]).view(f), _field(m, at[1], nbytes[1]).view(f),
+                 _field(m, at[2], nbytes[2]).view(CONTACT)),
+        _field(m, at[3], nbytes[3]).view(INPUT),
+        Integrator(_field(m, at[4], nbytes[4]).view(f), _field(m, at[5], nbytes[5]).view(f),
+                   _field(m, at[6], nbytes[6]).view(f).reshape((stages, ny)),
+                   _field(m, at[7], nbytes[7]).view(f).reshape((ny, k)), _field(m, at[8], nbytes[8]).view(CLOCK)),
+        Book(_field(m, at[9], nbytes[9]).view(BOOK_COUNTERS), _field(m, at[10], nbytes[10]).view(TOTALS),
+             _field(m, at[11], nbytes[11]).view(BOOK_PAIR), _field(m, at[12], nbytes[12]).view(f),
+             _field(m, at[13], nbytes[13]).view(f).reshape((npair, zeno_max))),
+        BroadPhase(_field(m, at[14], nbytes[14]).view(np.int64), _field(m, at[15], nbytes[15]).view(np.int64),
+                   _field(m, at[16], nbytes[16]).view(f).reshape((n, 6))),
+        _field(m, at[17], nbytes[17]).view(np.uint64))
 
 
 def _bytes(a: np.ndarray) -> np.ndarray:
