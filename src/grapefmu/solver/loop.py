@@ -243,6 +243,9 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         if changed or event or (bi < nbreak and t_commit >= X.breaks[bi]):
             rhs(t_commit, t_commit, P.y, I.f, C, M, X, inp, W, B.near, B.count[0])
             cnt.rhs_evaluations += 1
+            if not start_known:  # after an event: the berries at the next step's start are this evaluation's
+                copy_kinematics(W.berry, samples[0])
+                start_known = True
         else:
             I.f[:] = I.stages[ns]
         if not fixed:
