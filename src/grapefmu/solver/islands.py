@@ -123,7 +123,6 @@ class _Batch:
             self.saved[:] = before[[where_before[id(seg)] for seg in self.segs]]
 
 
-
 class Islands:
     """A whole run of an event-located scene in multirate islands (`run`); `Solver` arguments as in Solver."""
 

@@ -76,8 +76,8 @@ def island(template, n, n_dof, n_couplings, n_pairs, rows):
     """A Session for an island of n berries (n_dof angles, n_couplings couplings, n_pairs pairs) of the scene whose
     Session is `template`: the scene's excitation, tableau, settings and obstacles; a model of zeros with room for
     the island's rows (handover.form fills them), a state of zeros with its backup, a recorder of `rows` samples
-    and the loop's buffers, all made here (in Python they cost more than an island's window). An island is never
-    refreshed (its Run is assembled from its recorder), so it shares the template's `now`."""
+    and the loop's buffers, all made here (made in Python, they took 0.11 ms a system: 0.05 ms here, docs/solver.md).
+    An island is never refreshed (its Run is assembled from its recorder), so it shares the template's `now`."""
     P = template.model
     M = ModelArrays(np.zeros(n, BERRY), np.zeros(n_pairs, PAIR), np.zeros(n_couplings, COUPLING), P.obstacle,
                     P.gravity, n_dof, P.turning)
