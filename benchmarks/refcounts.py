@@ -1,6 +1,8 @@
 """Plain against atomic numba reference counts (physics/compiled.py): wall time of one `simulate` of the paper
 collision scene (1 ms output) at rtol 1e-6 and 1e-10, each mode in its own process (the switch is process-wide),
-the processes alternated, the minimum over all of a mode's runs.
+the processes alternated, the minimum over all of a mode's runs. The counts are compiled into every function
+(physics/compiled._counts_inlined), so the atomic processes keep their own numba cache (a temporary directory: the
+first one compiles, a few minutes).
 Run: .venv/bin/python benchmarks/refcounts.py"""
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -27,11 +30,15 @@ print(json.dumps(out))
 """
 
 
+ATOMIC_CACHE = tempfile.mkdtemp(prefix="grapefmu-atomic-cache-")
+
+
 def child(atomic: bool) -> dict[str, float]:
     env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
     env.pop("GRAPEFMU_ATOMIC_REFCOUNTS", None)
     if atomic:
         env["GRAPEFMU_ATOMIC_REFCOUNTS"] = "1"
+        env["NUMBA_CACHE_DIR"] = ATOMIC_CACHE
     out = subprocess.run([sys.executable, "-c", CHILD], env=env, capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 

@@ -1,6 +1,6 @@
-"""numba's reference counts are plain increments in grapefmu's process (physics/compiled.py): safe only while no
-compiled function releases the GIL, and it must not change a single number nor keep anything alive. The cache is
-stamped with every core source."""
+"""numba's reference counts are plain increments in grapefmu's process, inlined into the machine code
+(physics/compiled.py): safe only while no compiled function releases the GIL, and it must not change a single number
+nor keep anything alive. The cache is stamped with every core source and with how references are counted."""
 from __future__ import annotations
 
 import ast
@@ -52,27 +52,72 @@ def test_no_compiled_function_releases_the_gil():
     assert not offenders, offenders
 
 
-def _run(atomic: bool) -> dict:
+def _run(atomic: bool, cache: Path) -> dict:
     env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "NUMBA_NRT_STATS": "1"}
     env.pop("GRAPEFMU_ATOMIC_REFCOUNTS", None)
-    if atomic:
+    if atomic:  # its counts are compiled into its functions: a cache of its own
         env["GRAPEFMU_ATOMIC_REFCOUNTS"] = "1"
+        env["NUMBA_CACHE_DIR"] = str(cache)
     out = subprocess.run([sys.executable, "-c", RUN], env=env, capture_output=True, text=True, timeout=600, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def test_plain_counts_are_on_and_change_no_number():
+def test_plain_counts_are_on_and_change_no_number(tmp_path):
     """The same runs in a process with numba's atomic counts (GRAPEFMU_ATOMIC_REFCOUNTS=1) and one with plain counts:
     identical trajectories, impacts and peaks, bit for bit; and in both, numba frees what it holds: a run's arrays
     go when the run does, and every allocation numba's runtime made in three runs is freed by their end (numba's
     counters, NUMBA_NRT_STATS). numba's own plain-count switch froze every count above zero: a 2 s run leaked
     0.46 MB."""
-    plain, atomic = _run(False), _run(True)
+    plain, atomic = _run(False, tmp_path), _run(True, tmp_path)
     assert plain.pop("plain") is True and atomic.pop("plain") is False
     assert plain == atomic
     for name in ("paper collision", "pick and place"):
         assert plain[name + ": run's memory freed"]
     assert plain["numba allocations not freed"] == 0
+
+
+INLINED = r"""
+import json
+import numpy as np
+from numba import njit
+from numba.core.runtime import rtsys
+import grapefmu.physics.compiled  # inlines the counts into what numba compiles from now on
+
+@njit
+def ones(n):
+    return np.ones(n)
+
+@njit
+def total(n):
+    s = 0.0
+    for i in range(n):
+        s += ones(i % 3 + 1).sum()  # each array made in the call is dropped after its sum: a decrement
+    return s
+
+total(1)  # compiled, numba's runtime started
+before = rtsys.get_allocation_stats()
+value = total(1000)
+after = rtsys.get_allocation_stats()
+library = total.overloads[total.signatures[0]].library
+calls = lambda text: text.count("call void @NRT_incref(") + text.count("call void @NRT_decref(")
+print(json.dumps({"value": value, "in its machine code": calls(library.get_llvm_str()),
+                  "in what callers link": calls(str(library._get_module_for_linking())),
+                  "not freed": (after.alloc - before.alloc) - (after.free - before.free)}))
+"""
+
+
+def test_the_counts_are_inlined_where_they_run_and_calls_where_callers_prune():
+    """physics/compiled._counts_inlined: no call to NRT_incref or NRT_decref is left in a function's machine code,
+    the module its callers link in keeps them (numba prunes counts across an inlined callee by those calls), the
+    result is right and every array made is freed (numba's counters)."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "NUMBA_NRT_STATS": "1"}
+    out = subprocess.run([sys.executable, "-c", INLINED], env=env, capture_output=True, text=True, timeout=300,
+                         check=True)
+    got = json.loads(out.stdout.strip().splitlines()[-1])
+    assert got["value"] == 334 * 1 + 333 * 2 + 333 * 3
+    assert got["in its machine code"] == 0
+    assert got["in what callers link"] > 0
+    assert got["not freed"] == 0
 
 
 def test_the_fmus_import_path_loads_no_scipy_integrate():

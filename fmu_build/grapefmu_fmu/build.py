@@ -175,16 +175,16 @@ def _warm_up(scene: Path) -> None:
 
 def _live_cache_files(bundle: Path) -> list[Path]:
     """The numba cache files of the bundle that its sources can use: each index whose source stamp (the
-    SHA-256 of the module's bytes, as numba 0.68 checks it, and the digest of the core's sources,
-    physics/compiled.SOURCES) matches, and the data files it lists. A working checkout also holds the entries of
+    SHA-256 of the module's bytes, as numba 0.68 checks it, and physics/compiled.cache_stamp: the digest of the
+    core's sources and how references are counted) matches, and the data files it lists. A working checkout also holds the entries of
     earlier versions of its functions, which would only make the FMU larger (and past the cross-check's 10 MB)."""
     import pickle
 
     import numba
 
-    from grapefmu.physics.compiled import sources_digest
+    from grapefmu.physics.compiled import cache_stamp
 
-    core = sources_digest(bundle / "grapefmu")
+    core = cache_stamp(bundle / "grapefmu")
     out = []
     for index in sorted(bundle.rglob("__pycache__/*.nbi")):
         source = index.parent.parent / f"{index.name.split('.', 1)[0]}.py"
