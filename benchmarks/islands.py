@@ -1,8 +1,9 @@
 """Multirate islands against one step size (issue 14 item 4; docs/solver.md "Multirate islands"): for the Scale
 section's cluster (pick-and-place, rtol 1e-6, 1 s) at each N and window, interleaved, the minimum of a few runs:
 wall time both ways, the islands' compiled work alone (`session.windows`), the systems made (islands of a shape
-not seen before in the run: their Python), berry-steps (each island's steps × its berries, against steps × N), islands formed and rolled back, and their mean size; then what one step of a
-one-berry island costs against a berry-step of the whole cluster. --sections: where an islands run's wall time goes
+not seen before in the run: their Python), berry-steps (each island's steps × its berries, against steps × N),
+islands formed and rolled back, and their mean size; then what one step of a one-berry island costs against a
+berry-step of the whole cluster. --sections: where an islands run's wall time goes
 (default window, the fastest of the repeats): each compiled call Python makes and each step of the window loop, by
 wall time, calls and time per call (a timer around each adds about 1 µs a call).
 Run: .venv/bin/python benchmarks/islands.py [N ...] [--windows 0.01 0.02 0.04] [--repeats 3] [--join 5e-4] [--stay 5e-3]
@@ -114,7 +115,8 @@ def main() -> None:
                 wall = time.perf_counter() - t
                 if wall < best[w][0]:
                     sizes = [len(s.members) for s in it.segments]
-                    best[w] = (wall, compiled[0], it.berry_steps, it.formed, it.rollbacks, float(np.mean(sizes)), made[0], made[1])
+                    best[w] = (wall, compiled[0], it.berry_steps, it.formed, it.rollbacks, float(np.mean(sizes)),
+                               made[0], made[1])
         print(f"{n}-berry cluster, 1 s: one step size {1e3 * best['whole']:.1f} ms, {whole.stats['steps'] * n} "
               f"berry-steps")
         for w in a.windows:

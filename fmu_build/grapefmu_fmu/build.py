@@ -176,8 +176,9 @@ def _warm_up(scene: Path) -> None:
 def _live_cache_files(bundle: Path) -> list[Path]:
     """The numba cache files of the bundle that its sources can use: each index whose source stamp (the
     SHA-256 of the module's bytes, as numba 0.68 checks it, and physics/compiled.cache_stamp: the digest of the
-    core's sources and how references are counted) matches, and the data files it lists. A working checkout also holds the entries of
-    earlier versions of its functions, which would only make the FMU larger (and past the cross-check's 10 MB)."""
+    core's sources and how references are counted) matches, and the data files it lists. A working checkout also
+    holds the entries of earlier versions of its functions, which would only make the FMU larger (and past the
+    cross-check's 10 MB)."""
     import pickle
 
     import numba
