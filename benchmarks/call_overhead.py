@@ -4,24 +4,35 @@ Solver.advance's cost per call beyond the physics it integrates, and a whole sim
 
 advance's fixed cost is measured as (N calls of advance(dt) − one compiled loop that integrates to the same N
 communication points with the same held input) / N: both take exactly the same solver steps, so what is left
-is the call itself (checks, boxing, saving the state for rollback). Interleaved, best
-of 7. Run: .venv/bin/python benchmarks/call_overhead.py [scene.toml]"""
+is the call itself (checks, boxing, saving the state for rollback). Of that, Python's part (advance with its
+compiled call stubbed out) and numba's dispatch of advance's arguments to a compiled function that does nothing.
+Interleaved, best of 7. Run: .venv/bin/python benchmarks/call_overhead.py [scene.toml]"""
 from __future__ import annotations
 
 import sys
 import time
 
+import numba
 import numpy as np
 
 import grapefmu
 from grapefmu import Solver
 from grapefmu.bench.costs import compiled_steps
 from grapefmu.scenefile import default_scene_path
+from grapefmu.solver import session as ses
+from grapefmu.solver.loop import DONE
 
 N, DT = 2000, 1e-3
 #: the held input as the faces pass it (ACCEL_COMPONENTS: six floats); the planar pair (a_x, a_z) is accepted too,
 #: converted on a slower path
 ACCEL = (0.5, 0.0, 0.0, 0.0, 0.0, 0.0)
+OMEGA = (0.0, 0.0, 0.0)
+
+
+@numba.njit
+def nothing(s, dt, held, a, omega_set, omega, max_steps):
+    """session.advance's arguments and result, nothing done: what numba's dispatch alone costs."""
+    return DONE, dt, 0
 
 
 def main(path: str) -> None:
@@ -42,7 +53,21 @@ def main(path: str) -> None:
         for _ in range(N):
             s._integrate(s.t, s._scratch, 1)
 
-    times = {by_advance: [], compiled: [], noop: []}
+    def python_part():
+        compiled_advance = ses.advance
+        ses.advance = lambda *args: (DONE, 0.0, 0)
+        try:
+            for _ in range(N):
+                s.advance(DT, ACCEL)
+        finally:
+            ses.advance = compiled_advance
+
+    def dispatch():
+        for _ in range(N):
+            nothing(s._session, DT, True, ACCEL, False, OMEGA, s.max_steps)
+
+    nothing(s._session, DT, True, ACCEL, False, OMEGA, s.max_steps)
+    times = {by_advance: [], compiled: [], noop: [], python_part: [], dispatch: []}
     ends = {}
     for _ in range(7):
         for fn in times:
@@ -52,13 +77,15 @@ def main(path: str) -> None:
             times[fn].append((time.perf_counter() - w) / N)
             ends[fn] = s.y
     assert np.array_equal(ends[by_advance], ends[compiled]), "the two loops must take the same steps"
-    adv, comp, nop = (min(times[f]) for f in (by_advance, compiled, noop))
+    adv, comp, nop, py, disp = (min(times[f]) for f in (by_advance, compiled, noop, python_part, dispatch))
     sim = min(_timed(lambda: grapefmu.simulate(scene, 1e-3)) for _ in range(200))
     print(f"scene {path}, {N} steps of {DT * 1e3:g} ms, best of 7 (µs per call)")
     print(f"compiled call that integrates nothing (integrate(), ~40 arrays unboxed): {nop * 1e6:7.2f}")
     print(f"Solver.advance(1 ms), held input:                                       {adv * 1e6:7.2f}")
     print(f"the same communication points in one compiled loop:                     {comp * 1e6:7.2f}")
     print(f"advance fixed cost (the difference):                                    {(adv - comp) * 1e6:7.2f}")
+    print(f"  of which Python (advance, its compiled call stubbed out):             {py * 1e6:7.2f}")
+    print(f"  of which numba's dispatch (advance's arguments, nothing done):        {disp * 1e6:7.2f}")
     print(f"simulate(scene, t_end = 1 ms), set-up and result assembly:              {sim * 1e6:7.1f}")
 
 

@@ -47,7 +47,8 @@ def test_no_compiled_function_releases_the_gil():
                 if isinstance(node, ast.keyword) and node.arg in ("nogil", "parallel") and not (
                         isinstance(node.value, ast.Constant) and node.value.value is False):
                     offenders.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.arg}")
-                if isinstance(node, ast.Name | ast.Attribute) and getattr(node, "id", getattr(node, "attr", "")) == "prange":
+                name = getattr(node, "id", getattr(node, "attr", ""))
+                if isinstance(node, ast.Name | ast.Attribute) and name == "prange":
                     offenders.append(f"{path.relative_to(ROOT)}:{node.lineno} prange")
     assert not offenders, offenders
 
@@ -174,7 +175,7 @@ print(sum(components.stats.cache_hits.values()), sum(components.stats.cache_miss
 
 def test_an_edit_to_any_core_source_retires_every_cached_function(tmp_path):
     """numba checks a cached function against its own file only, but its machine code holds what it calls or
-    inlines from other files: the cache is stamped with every core source as well (physics/compiled.SOURCES). A
+    inlines from other files: the cache is stamped with every core source as well (physics/compiled.STAMP). A
     function whose own file did not change is loaded from the cache until another core file changes, then compiled
     again."""
     pkg = tmp_path / "pkg"

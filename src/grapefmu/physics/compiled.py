@@ -66,10 +66,8 @@ def _counts_inlined(library) -> None:
 
     Why: numba keeps the two counting functions out of line so that its reference-count pruning can see them; after
     the pruning they are still calls, each a few instructions of work behind a call that makes the caller spill its
-    registers. About 640 counts remain per step of a 2-berry scene and 860 per step of an island (numba's arrays
-    taken out of the model, state and workspace tuples at every inlined call): inlined, the seven benchmark scenes
-    run in 0.80-0.93x the time, a 10-berry cluster in 0.90x, islands of 30 and 100 berries in 0.94x, the same bit for
-    bit (docs/solver.md, "Reference counts").
+    registers, and hundreds remain per step (numba's arrays taken out of the model, state and workspace tuples at
+    every inlined call; how many, and what inlining them saves: docs/solver.md, "Reference counts").
     How: each call is renamed to an internal always-inline copy of its function and LLVM's always-inliner run. The
     module other libraries link in (numba's _shared_module) is the one from before, with the calls, so a caller that
     inlines this library's functions still prunes across them. The counts' bodies (plain or atomic) are then part of
@@ -120,17 +118,17 @@ def cache_stamp(root: Path = Path(__file__).resolve().parents[1]) -> bytes:
     return sources_digest(root) + COUNTS
 
 
-SOURCES = cache_stamp()
+STAMP = cache_stamp()
 
 
 def _stamped(dispatcher):
-    """The dispatcher, its cache stamped with SOURCES as well. Why: numba checks a cached function against its own
+    """The dispatcher, its cache stamped with STAMP as well. Why: numba checks a cached function against its own
     file only, yet its machine code holds the functions it calls or inlines from other files. After an edit or an
     upgrade that changed only a callee, a caller loaded stale code from the cache: a wrong result, or a write past
     an array that aborted the process (free(): invalid pointer, 2026-11-26). With the stamp, a change to any core
     source makes every cached function compile again, once. (numba internals, checked by tests/test_compiled.py.)"""
     cache_file = dispatcher._cache._cache_file
-    cache_file._source_stamp = (cache_file._source_stamp, SOURCES)
+    cache_file._source_stamp = (cache_file._source_stamp, STAMP)
     return dispatcher
 
 
@@ -139,7 +137,7 @@ _inline = nb.njit(cache=True, error_model="numpy", inline="always")
 
 
 def jit(f):
-    """A compiled function, cached on disk (stamped with SOURCES)."""
+    """A compiled function, cached on disk (stamped with STAMP)."""
     return _stamped(_jit(f))
 
 
