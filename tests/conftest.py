@@ -3,11 +3,16 @@ from __future__ import annotations
 
 import copy
 import math
+import os
 from pathlib import Path
 
 import pytest
 
 from grapefmu.scenefile import scene_from_dict
+
+# every process a test starts prints its Python stack if it crashes (pytest does so for its own): a segfault seen once
+# in CI, at the exit of an interrupted `grapefmu simulate`, left only its exit code
+os.environ.setdefault("PYTHONFAULTHANDLER", "1")
 
 KYOHO = {"mass": 0.011, "radius": 0.0135, "twig_length": 0.03, "hinge_stiffness": 1e-3, "hinge_damping": 2e-5}
 

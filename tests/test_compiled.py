@@ -194,3 +194,56 @@ def test_an_edit_to_any_core_source_retires_every_cached_function(tmp_path):
         f.write("\n# an edit elsewhere in the core\n")
     assert run() == (0, 1)   # compiled again, though drift.py is still unchanged
     assert run() == (1, 0)
+
+
+BOUNDS = r"""
+import json, sys
+import numpy as np
+import grapefmu
+from grapefmu import Solver, load_scene
+from grapefmu.bench.scale import scene as scale_scene
+from grapefmu.bench.scenes import bench_scenes, build
+from grapefmu.solver.islands import Islands
+scenes = sys.argv[1]
+out = {}
+
+def keep(name, run):
+    out[name] = [run.y.tolist(), run.impacts.onset.tolist(), run.peak_force.tolist(), run.totals.tolist()]
+
+for name, s in bench_scenes().items():  # both pairs: DOPRI5 at 1e-6, DOP853 at 1e-10
+    for rtol in (1e-6, 1e-10):
+        keep(f"{name} at {rtol}", grapefmu.simulate(build(s), rtol=rtol, atol=rtol * 1e-2))
+keep("paper method", grapefmu.simulate(load_scene(f"{scenes}/default.toml"), 1.0, method="paper"))
+keep("fixed step", grapefmu.simulate(load_scene(f"{scenes}/default.toml"), 1.0, fixed_step=2e-4))
+keep("obstacles", grapefmu.simulate(load_scene(f"{scenes}/setdown_fast.toml")))
+keep("cluster", grapefmu.simulate(scale_scene("cluster", 30), 0.3))
+keep("islands", Islands(scale_scene("cluster", 30)).run(0.3))
+s = Solver(load_scene(f"{scenes}/default.toml"), turning=True)  # as the FMU's and the node's (a planar scene
+for k in range(400):                                                 # turns about the rachis' y axis only)
+    s.advance(1e-3, base_accel=(3.0 * np.sin(0.05 * k), -2.0, 1.0, 0.0, 20.0 * np.cos(0.02 * k), 0.0),
+              angular_velocity=(0.0, 0.5 * np.sin(0.03 * k), 0.0))
+out["advance"] = [s.state.physical.y.tolist(), s.take_impacts().onset.tolist()]
+print(json.dumps(out))
+"""
+
+
+def test_no_compiled_function_indexes_out_of_bounds(tmp_path):
+    """The core compiled with numba's bounds checks (NUMBA_BOUNDSCHECK=1, in a cache of its own) runs every benchmark
+    scene with both pairs, the paper method, a fixed step, obstacles, a cluster with one step size and in islands,
+    and a turning rachis driven through advance(), without an index out of range, and computes the same numbers,
+    bit for bit, as the core without them. Why: without the checks an index out of range writes into whatever lies
+    beyond the array (a stale cache once did: free(): invalid pointer, physics/compiled._stamped), and the crash
+    comes later, elsewhere, or at the process's exit."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    checked = {**env, "NUMBA_BOUNDSCHECK": "1", "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def run(e: dict) -> str:
+        r = subprocess.run([sys.executable, "-c", BOUNDS, str(ROOT / "scenes")], env=e, capture_output=True,
+                           text=True, timeout=1200)
+        assert r.returncode == 0, r.stderr[-3000:]
+        return r.stdout.strip().splitlines()[-1]
+
+    plain, bounded = run(env), run(checked)
+    from grapefmu.bench.scenes import bench_scenes
+    assert len(json.loads(plain)) == 2 * len(bench_scenes()) + 6
+    assert plain == bounded  # as text: every float's repr, NaN and infinities included

@@ -246,10 +246,10 @@ def test_a_cold_cache_is_announced_in_one_line_before_the_compile(tmp_path):
     cold = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)})
     assert cold.stdout.split() == ["True", "True", "False"]  # once per process
-    assert re.fullmatch(r"grapefmu: compiling the core once \(about \d+ s\); later runs load it from the cache\n",
-                        cold.stderr)
-    from grapefmu import simulate
-    simulate(scene(dual(solver={"t_end": 0.01})))
+    assert re.fullmatch(r"grapefmu: compiling the core once \(\d+ to \d+ s on two cores\); "
+                        r"later runs load it from the cache\n", cold.stderr)
+    from grapefmu.solver.warmup import prepare
+    prepare(scene(dual(solver={"t_end": 0.01})), say=False)  # all a run calls, its summary and columns too
     warm = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert warm.stdout.split() == ["False", "False", "False"] and warm.stderr == ""
 
@@ -257,8 +257,11 @@ def test_a_cold_cache_is_announced_in_one_line_before_the_compile(tmp_path):
 def test_the_readme_states_the_compile_time_and_how_it_was_measured():
     from grapefmu.solver.warmup import COMPILE_SECONDS
     text = (ROOT / "README.md").read_text()
-    m = re.search(r"The first run compiles the numba core, and says so on stderr before it starts: (\d+) s", text)
-    assert m and abs(int(m.group(1)) - COMPILE_SECONDS) <= 0.25 * COMPILE_SECONDS  # the notice says about as much
+    m = re.search(r"The first run compiles the numba core, and says so on stderr before it starts: (\d+) s on [^,]+?"
+                  r"\s+and\s+(\d+) s on ", text)
+    assert m, "README.md gives no compile times"
+    for measured, said in zip(sorted(int(g) for g in m.groups()), COMPILE_SECONDS):  # the notice says what was measured
+        assert abs(measured - said) <= 0.1 * said
     assert "NUMBA_CACHE_DIR=$(mktemp -d)" in text and "grapefmu simulate --t-end 0.01" in text
 
 

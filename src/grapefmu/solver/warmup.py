@@ -2,7 +2,7 @@
 
 numba compiles the core on its first call in a process, or loads it from its cache (an index `*.nbi` and
 data `*.nbc` per function in `__pycache__` beside the sources, or under NUMBA_CACHE_DIR). Compiling takes
-about COMPILE_SECONDS (README.md: how it was measured), loading from the cache about a second.
+COMPILE_SECONDS on the machines measured (README.md: how), loading from the cache about a second.
 
 - `cache_is_cold()`: no usable cached code for the core (read from numba's index files, nothing compiled).
 - `notice()`: once per process, when the cache is cold, one line on stderr (or to `write`) before the compile.
@@ -22,9 +22,11 @@ from typing import NamedTuple
 
 from ..model.model import Scene
 
-#: the first compile of the core on a cold cache, s (README.md: measured on 2 cores, `NUMBA_CACHE_DIR` empty)
-COMPILE_SECONDS = 90
-NOTICE = "grapefmu: compiling the core once (about {seconds} s); later runs load it from the cache"
+#: the first compile of the core on a cold cache, s, fastest and slowest of the machines measured (README.md: two
+#: cores each, `NUMBA_CACHE_DIR` empty): said as a range, since one figure was half or twice the wait on the other
+COMPILE_SECONDS = (90, 180)
+NOTICE = ("grapefmu: compiling the core once ({seconds[0]} to {seconds[1]} s on two cores); later runs load it from "
+          "the cache")
 
 
 class Prepared(NamedTuple):
