@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import grapefmu
+from grapefmu.bench.scenes import bench_scenes
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -244,6 +245,5 @@ def test_no_compiled_function_indexes_out_of_bounds(tmp_path):
         return r.stdout.strip().splitlines()[-1]
 
     plain, bounded = run(env), run(checked)
-    from grapefmu.bench.scenes import bench_scenes
     assert len(json.loads(plain)) == 2 * len(bench_scenes()) + 6
     assert plain == bounded  # as text: every float's repr, NaN and infinities included

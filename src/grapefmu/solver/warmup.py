@@ -22,8 +22,8 @@ from typing import NamedTuple
 
 from ..model.model import Scene
 
-#: the first compile of the core on a cold cache, s, fastest and slowest of the machines measured (README.md: two
-#: cores each, `NUMBA_CACHE_DIR` empty): said as a range, since one figure was half or twice the wait on the other
+#: the first compile of the core on a cold cache, s, on the fastest and slowest machine measured (README.md: two
+#: cores each, `NUMBA_CACHE_DIR` empty): a range, because one machine took twice as long as the other
 COMPILE_SECONDS = (90, 180)
 NOTICE = ("grapefmu: compiling the core once ({seconds[0]} to {seconds[1]} s on two cores); later runs load it from "
           "the cache")
