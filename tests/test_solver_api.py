@@ -6,7 +6,7 @@ import pytest
 
 from grapefmu import Solver, SolverError, simulate
 from grapefmu.errors import StateError
-from grapefmu.solver.state import flatten
+from grapefmu.solver.state import flatten, zeros
 
 from .conftest import dual, scene
 
@@ -80,6 +80,27 @@ def test_a_step_the_solver_cannot_finish_leaves_the_state(collision_scene):
     with pytest.raises(SolverError, match="step limit"):
         s.advance(0.5)
     assert same_state(before, s.state)
+
+
+@pytest.mark.parametrize("ny, npair, n, stages, k, zeno_max", [(13, 1, 2, 7, 5, 8), (61, 0, 7, 13, 7, 3),
+                                                               (20, 45, 10, 7, 5, 8)])
+def test_every_array_of_a_state_lies_apart_in_its_one_buffer(ny, npair, n, stages, k, zeno_max):
+    """A step's backup and rollback copy the one buffer a state's arrays view (state.zeros): each array must lie
+    inside it, on a 16-byte boundary, apart from every other, and be all zeros."""
+    memory, state = zeros(ny, npair, n, stages, k, zeno_max)
+    base, spans = memory.ctypes.data, []
+    for name, a in flatten(state).items():
+        at = a.ctypes.data - base
+        assert at % 16 == 0 and 0 <= at and at + a.nbytes <= memory.nbytes, name
+        assert a.base is not None and not a.tobytes().strip(b"\0"), name
+        spans.append((at, at + a.nbytes, name))
+    spans.sort()
+    for (_, end, name), (start, _, after) in zip(spans, spans[1:]):
+        assert end <= start, f"{name} overlaps {after}"
+    assert (state.integrator.stages.shape, state.integrator.dense.shape, state.book.ring.shape,
+            state.broad_phase.reference.shape) == ((stages, ny), (ny, k), (npair, zeno_max), (n, 6))
+    memory.view(np.uint8)[:] = 7  # every byte of every array is the buffer's
+    assert all(not a.tobytes().strip(b"\7") for a in flatten(state).values())
 
 
 def test_held_csv_excitation_equals_held_advances(tmp_path):

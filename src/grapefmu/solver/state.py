@@ -166,14 +166,45 @@ def copy(state: SolverState) -> SolverState:
         BroadPhase(B.near.copy(), B.count.copy(), B.reference.copy()), state.fingerprint.copy())
 
 
+class _Bytes(NamedTuple):
+    """The bytes of each of a state's arrays, by its name in SolverState (zeros lays them out)."""
+
+    t: int
+    y: int
+    contacts: int
+    input: int
+    f: int
+    y_prev: int
+    stages: int
+    dense: int
+    clock: int
+    counters: int
+    totals: int
+    pair: int
+    peak_tension: int
+    ring: int
+    near: int
+    count: int
+    reference: int
+    fingerprint: int
+
+
 #: bytes per record of the state's record arrays (numba reads a dtype's size only as a number)
 _CONTACT_B, _INPUT_B, _CLOCK_B = CONTACT.itemsize, INPUT.itemsize, CLOCK.itemsize
 _COUNTERS_B, _TOTALS_B, _BOOK_PAIR_B = BOOK_COUNTERS.itemsize, TOTALS.itemsize, BOOK_PAIR.itemsize
 
 
 @inline
-def _field(memory, at, nbytes):
-    """nbytes of memory from 8-byte word `at` on, as bytes to view."""
+def _words(nbytes):
+    """8-byte words an array of nbytes takes, rounded up to 16 bytes so that the next one starts aligned."""
+    return (nbytes + 15) // 16 * 2
+
+
+@inline
+def _take(memory, free, nbytes):
+    """The next nbytes of memory as bytes to view (free[0]: the first word not taken yet)."""
+    at = free[0]
+    free[0] = at + _words(nbytes)
     return memory[at:at + (nbytes + 7) // 8].view(np.uint8)[:nbytes]
 
 
@@ -181,31 +212,32 @@ def _field(memory, at, nbytes):
 def zeros(ny, npair, n, stages, k, zeno_max):
     """A state of zeros for ny state variables, npair pairs, n berries, a method of `stages` stages and k dense
     coefficients, as views on one buffer of 8-byte words (returned first): saving the state before a step and
-    restoring it after a failure are then one copy of the buffer. Each array starts on a 16-byte boundary, in
-    flatten's order; two spare words at the end (an empty array may sit there). Compiled, so that an island's
-    state is made where its session is (session.island), never passing through Python."""
-    nbytes = (8, 8 * ny, npair * _CONTACT_B, _INPUT_B, 8 * ny, 8 * ny, 8 * stages * ny, 8 * ny * k, _CLOCK_B,
-              _COUNTERS_B, _TOTALS_B, npair * _BOOK_PAIR_B, 8 * n, 8 * npair * zeno_max, 8 * npair, 8, 48 * n, 8)
-    at = np.empty(len(nbytes), np.int64)
+    restoring it after a failure are then one copy of the buffer. Each array starts on a 16-byte boundary; two
+    spare words at the end (an empty array may sit there). Compiled, so that an island's state is made where its
+    session is (session.island), never passing through Python."""
+    b = _Bytes(t=8, y=8 * ny, contacts=npair * _CONTACT_B, input=_INPUT_B, f=8 * ny, y_prev=8 * ny,
+               stages=8 * stages * ny, dense=8 * ny * k, clock=_CLOCK_B, counters=_COUNTERS_B, totals=_TOTALS_B,
+               pair=npair * _BOOK_PAIR_B, peak_tension=8 * n, ring=8 * npair * zeno_max, near=8 * npair, count=8,
+               reference=48 * n, fingerprint=8)
     end = 0
-    for i in range(len(nbytes)):
-        at[i] = (end + 1) // 2 * 2
-        end = at[i] + (nbytes[i] + 7) // 8
+    for nbytes in b:
+        end += _words(nbytes)
     memory = np.zeros(end + 2, np.uint64)
+    free = np.zeros(1, np.int64)
     m, f = memory, np.float64
-    return memory, SolverState(
-        Physical(_field(m, at[0], nbytes[0]).view(f), _field(m, at[1], nbytes[1]).view(f),
-                 _field(m, at[2], nbytes[2]).view(CONTACT)),
-        _field(m, at[3], nbytes[3]).view(INPUT),
-        Integrator(_field(m, at[4], nbytes[4]).view(f), _field(m, at[5], nbytes[5]).view(f),
-                   _field(m, at[6], nbytes[6]).view(f).reshape((stages, ny)),
-                   _field(m, at[7], nbytes[7]).view(f).reshape((ny, k)), _field(m, at[8], nbytes[8]).view(CLOCK)),
-        Book(_field(m, at[9], nbytes[9]).view(BOOK_COUNTERS), _field(m, at[10], nbytes[10]).view(TOTALS),
-             _field(m, at[11], nbytes[11]).view(BOOK_PAIR), _field(m, at[12], nbytes[12]).view(f),
-             _field(m, at[13], nbytes[13]).view(f).reshape((npair, zeno_max))),
-        BroadPhase(_field(m, at[14], nbytes[14]).view(np.int64), _field(m, at[15], nbytes[15]).view(np.int64),
-                   _field(m, at[16], nbytes[16]).view(f).reshape((n, 6))),
-        _field(m, at[17], nbytes[17]).view(np.uint64))
+    physical = Physical(_take(m, free, b.t).view(f), _take(m, free, b.y).view(f),
+                        _take(m, free, b.contacts).view(CONTACT))
+    inp = _take(m, free, b.input).view(INPUT)
+    integrator = Integrator(_take(m, free, b.f).view(f), _take(m, free, b.y_prev).view(f),
+                            _take(m, free, b.stages).view(f).reshape((stages, ny)),
+                            _take(m, free, b.dense).view(f).reshape((ny, k)), _take(m, free, b.clock).view(CLOCK))
+    book = Book(_take(m, free, b.counters).view(BOOK_COUNTERS), _take(m, free, b.totals).view(TOTALS),
+                _take(m, free, b.pair).view(BOOK_PAIR), _take(m, free, b.peak_tension).view(f),
+                _take(m, free, b.ring).view(f).reshape((npair, zeno_max)))
+    broad_phase = BroadPhase(_take(m, free, b.near).view(np.int64), _take(m, free, b.count).view(np.int64),
+                             _take(m, free, b.reference).view(f).reshape((n, 6)))
+    return memory, SolverState(physical, inp, integrator, book, broad_phase,
+                               _take(m, free, b.fingerprint).view(np.uint64))
 
 
 def _bytes(a: np.ndarray) -> np.ndarray:
