@@ -103,4 +103,9 @@ def test_scale_reports_the_fitted_exponent():
     assert 1.1 < best < 1.5
     assert f"at most 1.2: **1.50** (row), **1.50** (cluster); the cheaper of one step size and islands at each N: " \
            f"**{best:.2f}**, **{best:.2f}**; {'met' if best <= 1.2 else 'missed'}." in text
-    assert "**0.2 s** (5.0× real time), missed" in text
+    assert "**0.2 s** (5.0× real time) with one step size (the default), **0.2 s** (5.0×) in islands" in text
+    assert "(`solver.islands = true`); missed." in text
+    sizes = [r | {"islands": r["islands"] / 4} if r["n"] == 100 and r["kind"] == "cluster" else r for r in sizes]
+    text = scale_markdown({"sizes": sizes, "smooth": [], "skin": []}, "scale.png")
+    assert "**0.2 s** (5.0× real time) with one step size (the default), **0.05 s** (20.0×) in islands" in text
+    assert "(`solver.islands = true`); met." in text
