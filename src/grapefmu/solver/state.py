@@ -212,9 +212,9 @@ def _take(memory, free, nbytes):
 def zeros(ny, npair, n, stages, k, zeno_max):
     """A state of zeros for ny state variables, npair pairs, n berries, a method of `stages` stages and k dense
     coefficients, as views on one buffer of 8-byte words (returned first): saving the state before a step and
-    restoring it after a failure are then one copy of the buffer. Each array starts on a 16-byte boundary; two
-    spare words at the end (an empty array may sit there). Compiled, so that an island's state is made where its
-    session is (session.island), never passing through Python."""
+    restoring it after a failure are then one copy of the buffer. Each array starts on a 16-byte boundary.
+    Compiled, so that an island's state is made where its session is (session.island), never passing through
+    Python."""
     b = _Bytes(t=8, y=8 * ny, contacts=npair * _CONTACT_B, input=_INPUT_B, f=8 * ny, y_prev=8 * ny,
                stages=8 * stages * ny, dense=8 * ny * k, clock=_CLOCK_B, counters=_COUNTERS_B, totals=_TOTALS_B,
                pair=npair * _BOOK_PAIR_B, peak_tension=8 * n, ring=8 * npair * zeno_max, near=8 * npair, count=8,
@@ -222,7 +222,7 @@ def zeros(ny, npair, n, stages, k, zeno_max):
     end = 0
     for nbytes in b:
         end += _words(nbytes)
-    memory = np.zeros(end + 2, np.uint64)
+    memory = np.zeros(end, np.uint64)
     free = np.zeros(1, np.int64)
     m, f = memory, np.float64
     physical = Physical(_take(m, free, b.t).view(f), _take(m, free, b.y).view(f),
