@@ -11,6 +11,8 @@ import pytest
 from grapefmu.cluster import ClusterSpec, RowSpec, cluster_scene, row_scene
 from grapefmu.errors import SceneError
 from grapefmu.model import ContactPair, Model
+from grapefmu.model import model as model_module
+from grapefmu.model.model import SolverSettings
 from grapefmu.scenefile import load_scene, scene_from_dict
 from grapefmu.physics.kinematics import positions
 from grapefmu.solver.api import simulate
@@ -254,10 +256,29 @@ def test_a_scene_asks_for_islands():
     np.testing.assert_array_equal(run.impacts.pair, whole.impacts.pair)
     np.testing.assert_allclose(run.impacts.onset, whole.impacts.onset, atol=1e-7)
     for bad, why in (({"method": "paper"}, "'event' method"), ({"fixed_step": 1e-4}, "adaptive steps"),
-                     ({"islands": 1}, "true or false")):
+                     ({"islands": 1}, 'true, false or "auto"'), ({"islands": "always"}, 'true, false or "auto"')):
         with pytest.raises(SceneError, match=r"solver\.islands: .*" + why):
             scene_from_dict({**doc, "solver": {**doc["solver"], **bad}}, Path.cwd())
     assert "islands_formed" not in simulate(sc, t_end=0.05, method="paper").stats
+
+
+def test_auto_islands_from_a_number_of_berries(monkeypatch):
+    """`solver.islands = "auto"` (the default) runs `simulate` in islands from ISLANDS_FROM berries on (the Run of
+    Islands(scene).run()), in one Solver below, and in one Solver for a method or fixed step islands cannot take,
+    where `true` is refused."""
+    solver = {"t_end": 0.3, "rtol": 1e-8, "atol": 1e-11}
+    sc = scene_from_dict(cluster_scene(ClusterSpec(berries=12, seed=1, solver=solver)), Path.cwd())
+    assert sc.solver.islands == "auto" == SolverSettings().islands
+    monkeypatch.setattr(model_module, "ISLANDS_FROM", 12)
+    run = simulate(sc)
+    assert run.stats["islands_formed"] > 5
+    np.testing.assert_array_equal(run.y, Islands(sc).run().y)
+    for method, step in (("paper", 0.0), ("event", 1e-4)):
+        assert "islands_formed" not in simulate(sc, method=method, fixed_step=step, cross_check=False).stats
+    monkeypatch.setattr(model_module, "ISLANDS_FROM", 13)
+    one = simulate(sc)
+    assert "islands_formed" not in one.stats
+    np.testing.assert_array_equal(one.y, Solver(sc).run().y)
 
 
 def test_islands_record_a_stepped_rachis_as_one_solver_does():

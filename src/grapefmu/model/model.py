@@ -262,9 +262,22 @@ class SolverSettings:
     #: control alone resolves their onsets (docs/benchmarks.md measures which is cheaper where)
     contact_location: str = "events"
     #: integrate in multirate islands (solver/islands.py): each group of berries that cannot touch the others within
-    #: a window takes its own steps; cheaper than one step size from about 100 berries (docs/benchmarks.md, Scale).
-    #: 'event' method with adaptive steps only; the faces (FMU, node) always step the whole scene
-    islands: bool = False
+    #: a window takes its own steps. True or False, or "auto": in islands from ISLANDS_FROM berries on, where the
+    #: method allows. 'event' method with adaptive steps only; the faces (FMU, node) always step the whole scene
+    islands: bool | str = "auto"
+
+
+#: berries from which `solver.islands = "auto"` runs a scene in multirate islands: below, islands cost more than one
+#: step size in most scenes measured; from here on less, by more as N grows, except at loose tolerances and in compact
+#: clusters (within 1.2×): `.venv/bin/python benchmarks/islands_crossover.py` (docs/solver.md "Multirate islands")
+ISLANDS_FROM = 100
+
+
+def runs_in_islands(islands: bool | str, n_berries: int, method: str, fixed_step: float) -> bool:
+    """Whether `simulate` runs a scene (a group of it) of n_berries in multirate islands (`solver.islands`)."""
+    if islands == "auto":
+        return n_berries >= ISLANDS_FROM and islands_refusal(method, fixed_step) is None
+    return bool(islands) and islands_refusal(method, fixed_step) is None
 
 
 def islands_refusal(method: str, fixed_step: float) -> str | None:

@@ -367,12 +367,18 @@ def _solver(raw: Any) -> SolverSettings:
         zeno_max_events=v.integer(f"{key}.zeno_max_events", raw.get("zeno_max_events", d.zeno_max_events), 2, 10**6),
         contact_location=v.choice(f"{key}.contact_location", raw.get("contact_location", d.contact_location),
                                   ("events", "step-control")),
-        islands=v.boolean(f"{key}.islands", raw.get("islands", d.islands)),
+        islands=_islands(f"{key}.islands", raw.get("islands", d.islands)),
     )
-    why = islands_refusal(s.method, s.fixed_step) if s.islands else None
+    why = islands_refusal(s.method, s.fixed_step) if s.islands is True else None
     if why:
         raise SceneError(f"{key}.islands", why)
     return s
+
+
+def _islands(key: str, raw: Any) -> bool | str:
+    if raw == "auto" or isinstance(raw, bool):
+        return raw
+    raise SceneError(key, f"expected true, false or \"auto\", got {v.show(raw)}")
 
 
 def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:

@@ -6,7 +6,7 @@ from collections.abc import Callable
 
 from ..errors import GrapefmuError
 from ..model.excitation import check_covers
-from ..model.model import Scene, islands_refusal
+from ..model.model import Scene, runs_in_islands
 from ..results.run import Run
 from .budget import check_samples
 from .components import run_by_group
@@ -25,8 +25,9 @@ def simulate(scene: Scene, t_end: float | None = None, *, method: str | None = N
              progress: Callable[[float, float], None] | None = None, cross_check: bool | None = None) -> Run:
     """A whole run. Groups of berries that can never interact are integrated one group at a time
     (solver/components.py); Solver itself steps the whole scene together, as an FMU or node must. With
-    `solver.islands` set, an event-located run with adaptive steps goes in multirate islands (solver/islands.py);
-    a caller's method or fixed step that islands cannot take runs without them.
+    `solver.islands` true, or "auto" (the default) and a group of at least ISLANDS_FROM berries, an event-located
+    run with adaptive steps goes in multirate islands (solver/islands.py); a caller's method or fixed step that
+    islands cannot take runs without them.
 
     A 'paper' run (contacts checked at step ends, no event location) is compared with an 'event' run of
     the same scene (`cross_check`, on by default for the paper method); a disagreement, or a comparison
@@ -43,12 +44,11 @@ def simulate(scene: Scene, t_end: float | None = None, *, method: str | None = N
         return run_by_group(scene, lambda sc, *_: simulate_reference(sc, t_end, rtol=rtol, atol=atol,
                                                                      output_interval=output_interval))
 
-    islands = scene.solver.islands and not islands_refusal(
-        method, scene.solver.fixed_step if fixed_step is None else fixed_step)
+    step = scene.solver.fixed_step if fixed_step is None else fixed_step
 
     def one(sc: Scene, done: float, share: float) -> Run:
         hook = None if progress is None else lambda t, te: progress((done + share * t / te) * te, te)
-        if islands:
+        if runs_in_islands(scene.solver.islands, sc.model.n_berries, method, step):
             return Islands(sc, rtol=rtol, atol=atol).run(t_end, output_interval, hook)
         return Solver(sc, method=method, rtol=rtol, atol=atol, fixed_step=fixed_step).run(t_end, output_interval, hook)
 
