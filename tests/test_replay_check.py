@@ -193,3 +193,27 @@ def test_a_nan_in_a_recorded_angle_is_a_deviation(recordings, tmp_path):
     path = tmp_path / "nan.mcap"
     rewrite(recordings["chunked"], path, poison)
     assert not check(path).ok
+
+
+def test_a_recording_is_rerun_the_way_it_ran_in_islands_or_not(tmp_path, monkeypatch):
+    """A recording keeps the berry count from which `solver.islands = "auto"` ran a scene in islands: replayed under
+    another count (or one recorded before "auto", when every such run took one step size), it is re-simulated as
+    it ran, to the bit, where the rule of the day would run it the other way (islands or one step size differ
+    within the tolerance asked, not to the bit)."""
+    from grapefmu.cluster import ClusterSpec, cluster_scene
+    from grapefmu.model import model as model_module
+    from grapefmu.scenefile import scene_from_dict
+    solver = {"t_end": 0.2, "rtol": 1e-8, "atol": 1e-11}
+    sc = scene_from_dict(cluster_scene(ClusterSpec(berries=12, seed=1, solver=solver)), Path.cwd())
+    for ran_from, replay_from in ((1000, 12), (12, 1000)):
+        monkeypatch.setattr(model_module, "ISLANDS_FROM", ran_from)
+        monkeypatch.setattr("grapefmu.recording.mcap_writer.ISLANDS_FROM", ran_from)
+        run = simulate(sc)
+        assert ("islands_formed" in run.stats) == (ran_from == 12)
+        path = tmp_path / f"from{ran_from}.mcap"
+        write_mcap(run, path)
+        monkeypatch.setattr(model_module, "ISLANDS_FROM", replay_from)
+        monkeypatch.setattr("grapefmu.recording.replay.ISLANDS_FROM", replay_from)
+        assert ("islands_formed" in simulate(sc).stats) == (replay_from == 12)  # today's rule: the other way
+        result = check(path)
+        assert result.compared == len(run.t) and result.max_deviation == 0.0

@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 from .. import __version__
+from ..model.model import ISLANDS_FROM
 from ..results.run import Run
 from ..results.writers import atomic_path
 from . import messages
@@ -21,7 +22,8 @@ def run_metadata(run: Run) -> dict[str, str]:
             "method": str(run.stats.get("method", s.method)), "input_source": "scene",
             "namespace": messages.NAMESPACE,
             "solver": json.dumps({"rtol": run.stats.get("rtol", s.rtol), "atol": run.stats.get("atol", s.atol),
-                                  "t_end": float(run.t[-1]), "output_interval": s.output_interval})}
+                                  "t_end": float(run.t[-1]), "output_interval": s.output_interval,
+                                  "islands_from": ISLANDS_FROM})}
 
 
 #: markers and /tf in a simulate recording, Hz (a 3D panel needs far fewer than the state topics' samples)

@@ -23,12 +23,13 @@ import mmap
 import os
 import struct
 import zlib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import GrapefmuError, RecordingError
+from ..model.model import ISLANDS_FROM
 from ..scenefile import parse_scene
 from .messages import NAMESPACE, relative
 from .stamps import seconds, stamp_seconds, to_ns
@@ -254,6 +255,13 @@ def _deviation(a: np.ndarray, b: np.ndarray) -> float:
     return float(d.max(initial=0.0)) if np.isfinite(d).all() else math.inf
 
 
+def _islands_from(cfg: dict) -> float:
+    """The berries from which the recorded run went in islands under `solver.islands = "auto"` (recordings made
+    before that setting: never)."""
+    v = cfg.get("islands_from")
+    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else math.inf
+
+
 def _settings(path: Path, rec: Recording):
     """The scene and solver settings a recording was made with, or a RecordingError saying why not."""
     try:
@@ -321,6 +329,10 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
 
     if source == "scene":
         from ..solver.api import simulate
+        if scene.solver.islands == "auto" and _islands_from(solver_cfg) != ISLANDS_FROM:
+            # run under another "auto" rule (none before it existed: one step size), as that rule chose
+            islands = scene.model.n_berries >= _islands_from(solver_cfg)
+            scene = replace(scene, solver=replace(scene.solver, islands=islands))
         run = simulate(scene, solver_cfg.get("t_end"), method=rec.metadata.get("method"), rtol=solver_cfg.get("rtol"),
                        atol=solver_cfg.get("atol"), output_interval=solver_cfg.get("output_interval"),
                        cross_check=False)
