@@ -20,7 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
-from ..model.model import Scene
+from ..model.model import Scene, runs_in_islands
 
 #: the first compile of the core on a cold cache, s, on the fastest and slowest machine measured (README.md: two
 #: cores each, `NUMBA_CACHE_DIR` empty): a range, because one machine took twice as long as the other
@@ -88,6 +88,8 @@ def prepare(scene: Scene, method: str | None = None, *, say: bool = True,
 
     method = method or scene.solver.method
     family = "reference" if method == "reference" else "event"
+    if runs_in_islands(scene.solver.islands, scene.model.n_berries, method, scene.solver.fixed_step):
+        family = "islands"  # solver/islands.py's own compiled calls besides the event method's
     if family in _prepared:
         return Prepared(0.0, False)
     cold = cache_is_cold()
