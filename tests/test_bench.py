@@ -14,8 +14,8 @@ import grapefmu
 from grapefmu.bench.harness import Row, cost_at
 from grapefmu.bench.lean import simulate_lean
 from grapefmu.bench.scale import SIZES, markdown as scale_markdown, slope
-from grapefmu.model.model import ISLANDS_FROM
 from grapefmu.bench.scenes import bench_scenes, build
+from grapefmu.model.model import ISLANDS_FROM
 
 
 def test_quick_bench_reports_every_method_against_agreeing_references(tmp_path):

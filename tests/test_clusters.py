@@ -264,8 +264,8 @@ def test_a_scene_asks_for_islands():
 
 def test_auto_islands_from_a_number_of_berries(monkeypatch):
     """`solver.islands = "auto"` (the default) runs `simulate` in islands from ISLANDS_FROM berries on (the Run of
-    Islands(scene).run()), in one Solver below, and in one Solver for a method or fixed step islands cannot take,
-    where `true` is refused."""
+    Islands(scene).run()), in one Solver below, and in one Solver for a method or fixed step islands cannot take
+    (which `true` refuses at load: test_a_scene_asks_for_islands)."""
     solver = {"t_end": 0.3, "rtol": 1e-8, "atol": 1e-11}
     sc = scene_from_dict(cluster_scene(ClusterSpec(berries=12, seed=1, solver=solver)), Path.cwd())
     assert sc.solver.islands == "auto" == SolverSettings().islands

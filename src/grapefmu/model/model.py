@@ -276,8 +276,8 @@ ISLANDS_FROM = 100
 def runs_in_islands(islands: bool | str, n_berries: int, method: str, fixed_step: float) -> bool:
     """Whether `simulate` runs a scene (a group of it) of n_berries in multirate islands (`solver.islands`)."""
     if islands == "auto":
-        return n_berries >= ISLANDS_FROM and islands_refusal(method, fixed_step) is None
-    return bool(islands) and islands_refusal(method, fixed_step) is None
+        islands = n_berries >= ISLANDS_FROM
+    return islands is True and islands_refusal(method, fixed_step) is None
 
 
 def islands_refusal(method: str, fixed_step: float) -> str | None:
