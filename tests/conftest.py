@@ -4,6 +4,8 @@ from __future__ import annotations
 import copy
 import math
 import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -13,6 +15,17 @@ from grapefmu.scenefile import scene_from_dict
 # every process a test starts prints its Python stack if it crashes (pytest does so for its own): a segfault seen once
 # in CI, at the exit of an interrupted `grapefmu simulate`, left only its exit code
 os.environ.setdefault("PYTHONFAULTHANDLER", "1")
+
+# fmpy's `extract` unpacks each FMU into a fresh temporary directory that nobody removes (37 MB each, 23 a session):
+# every temporary file of the session and of the processes it starts goes under one root, removed at the end.
+# pytest's own tmp_path stays where it was, so a failed test's files can still be read.
+os.environ.setdefault("PYTEST_DEBUG_TEMPROOT", tempfile.gettempdir())
+_SESSION_TMP = tempfile.mkdtemp(prefix="grapefmu-tests-")
+os.environ["TMPDIR"] = tempfile.tempdir = _SESSION_TMP
+
+
+def pytest_sessionfinish(session, exitstatus):
+    shutil.rmtree(_SESSION_TMP, ignore_errors=True)
 
 KYOHO = {"mass": 0.011, "radius": 0.0135, "twig_length": 0.03, "hinge_stiffness": 1e-3, "hinge_damping": 2e-5}
 
