@@ -5,7 +5,9 @@ Solver.advance's cost per call beyond the physics it integrates, and a whole sim
 advance's fixed cost is measured as (N calls of advance(dt) − one compiled loop that integrates to the same N
 communication points with the same held input) / N: both take exactly the same solver steps, so what is left
 is the call itself (checks, boxing, saving the state for rollback). Of that, Python's part (advance with its
-compiled call stubbed out) and numba's dispatch of advance's arguments to a compiled function that does nothing.
+compiled call stubbed out) and the call of a compiled function that does nothing with advance's arguments: through
+numba's dispatcher, which types every argument, and straight to its compiled entry (physics/compiled.entry), as
+advance calls it.
 Interleaved, best of 7. Run: .venv/bin/python benchmarks/call_overhead.py [scene.toml]"""
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ import numpy as np
 import grapefmu
 from grapefmu import Solver
 from grapefmu.bench.costs import compiled_steps
+from grapefmu.physics.compiled import entry
 from grapefmu.scenefile import default_scene_path
 from grapefmu.solver import session as ses
 from grapefmu.solver.loop import DONE
@@ -54,20 +57,25 @@ def main(path: str) -> None:
             s._integrate(s.t, s._scratch, 1)
 
     def python_part():
-        compiled_advance = ses.advance
-        ses.advance = lambda *args: (DONE, 0.0, 0)
+        compiled_advance = s._advance
+        s._advance = lambda *args: (DONE, 0.0, 0)
         try:
             for _ in range(N):
                 s.advance(DT, ACCEL)
         finally:
-            ses.advance = compiled_advance
+            s._advance = compiled_advance
 
     def dispatch():
         for _ in range(N):
             nothing(s._session, DT, True, ACCEL, False, OMEGA, s.max_steps)
 
-    nothing(s._session, DT, True, ACCEL, False, OMEGA, s.max_steps)
-    times = {by_advance: [], compiled: [], noop: [], python_part: [], dispatch: []}
+    direct = entry(nothing, s._session, DT, True, ACCEL, False, OMEGA, s.max_steps)
+
+    def straight():
+        for _ in range(N):
+            direct(s._session, DT, True, ACCEL, False, OMEGA, s.max_steps)
+
+    times = {by_advance: [], compiled: [], noop: [], python_part: [], dispatch: [], straight: []}
     ends = {}
     for _ in range(7):
         for fn in times:
@@ -77,7 +85,8 @@ def main(path: str) -> None:
             times[fn].append((time.perf_counter() - w) / N)
             ends[fn] = s.y
     assert np.array_equal(ends[by_advance], ends[compiled]), "the two loops must take the same steps"
-    adv, comp, nop, py, disp = (min(times[f]) for f in (by_advance, compiled, noop, python_part, dispatch))
+    adv, comp, nop, py, disp, ent = (min(times[f]) for f in (by_advance, compiled, noop, python_part, dispatch,
+                                                              straight))
     sim = min(_timed(lambda: grapefmu.simulate(scene, 1e-3)) for _ in range(200))
     print(f"scene {path}, {N} steps of {DT * 1e3:g} ms, best of 7 (µs per call)")
     print(f"compiled call that integrates nothing (integrate(), ~40 arrays unboxed): {nop * 1e6:7.2f}")
@@ -85,7 +94,8 @@ def main(path: str) -> None:
     print(f"the same communication points in one compiled loop:                     {comp * 1e6:7.2f}")
     print(f"advance fixed cost (the difference):                                    {(adv - comp) * 1e6:7.2f}")
     print(f"  of which Python (advance, its compiled call stubbed out):             {py * 1e6:7.2f}")
-    print(f"  of which numba's dispatch (advance's arguments, nothing done):        {disp * 1e6:7.2f}")
+    print(f"  of which the compiled call (advance's arguments, nothing done):       {ent * 1e6:7.2f}")
+    print(f"  (the same through numba's dispatcher, which advance skips):           {disp * 1e6:7.2f}")
     print(f"simulate(scene, t_end = 1 ms), set-up and result assembly:              {sim * 1e6:7.1f}")
 
 

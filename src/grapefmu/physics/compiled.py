@@ -141,6 +141,14 @@ def jit(f):
     return _stamped(_jit(f))
 
 
+def entry(dispatcher, *args):
+    """dispatcher's compiled function for exactly these arguments' types (compiled, or loaded from the cache, once),
+    to call without numba's dispatch, which types every argument on every call: 0.7 µs of a face's step
+    (benchmarks/call_overhead.py). Only for a caller whose arguments always have these types (Solver.advance
+    checks them first): the compiled function converts what it is given to them instead of choosing another."""
+    return dispatcher.compile(tuple(nb.typeof(a) for a in args))
+
+
 def inline(f):
     """A small helper compiled into its callers (a call boundary costs more than its arithmetic), cached as jit."""
     return _stamped(_inline(f))

@@ -19,7 +19,7 @@ from ..model.contact import HC_MIN_APPROACH_SPEED, Law
 from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from ..model.model import Scene, off_axis
 from ..physics import observe as obs
-from ..physics.compiled import jit
+from ..physics.compiled import entry, jit
 from ..physics.excitation import ACCEL_COMPONENTS, base_accel
 from ..physics.kinematics import kinematics, workspace
 from ..physics.layout import LEDGER_TERMS, angular_velocity, initial, ledger, layout_of, orientation
@@ -101,7 +101,7 @@ class Solver:
         self.atol = atol if atol is not None else s.atol
         self.fixed_step = fixed_step if fixed_step is not None else s.fixed_step
         self.tableau = tableau_for(self.method, self.rtol, self.fixed_step)
-        self.max_steps = max_steps
+        self.max_steps = int(max_steps)
         self.model = scene.model
         self.M = scene.arrays
         self.excitation = scene.excitation.arrays
@@ -117,6 +117,7 @@ class Solver:
                           s.contact_location == "step-control" and self.method == "event", th.bruise_force,
                           th.bruise_energy, th.detachment_force)
         self._closed: list[np.ndarray] = []
+        self._advance = None  # session.advance for advance's argument types (compiled.entry), on the first call
         # the state's arrays are views on _memory, so that a step's backup and rollback are one copy each
         self._memory, self.state = self._fresh_state(s.zeno_max_events, float(t_start))
         self._backup = np.zeros_like(self._memory)
@@ -285,7 +286,9 @@ class Solver:
         if self._plane_normal is not None and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
             self._check_input(a, omega)  # ranges first, then the plane
         kept = len(self._closed)
-        status, t_target, n_impacts = ses.advance(self._session, dt, held, a, omega_set, omega, self.max_steps)
+        if self._advance is None:
+            self._advance = entry(ses.advance, self._session, dt, held, a, omega_set, omega, self.max_steps)
+        status, t_target, n_impacts = self._advance(self._session, dt, held, a, omega_set, omega, self.max_steps)
         if status == REFUSED:
             self._check_input(a, omega)
             raise SolverError(f"base_accel, angular_velocity: {a}, {omega} refused")  # _check_input said why
