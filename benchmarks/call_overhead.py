@@ -75,7 +75,11 @@ def main(path: str) -> None:
         for _ in range(N):
             direct(s._session, DT, True, ACCEL, False, OMEGA, s.max_steps)
 
-    times = {by_advance: [], compiled: [], noop: [], python_part: [], dispatch: [], straight: []}
+    def snapshots():  # what a face reads its outputs from after each step
+        for _ in range(N):
+            s.snapshot()
+
+    times = {by_advance: [], compiled: [], noop: [], python_part: [], dispatch: [], straight: [], snapshots: []}
     ends = {}
     for _ in range(7):
         for fn in times:
@@ -85,8 +89,8 @@ def main(path: str) -> None:
             times[fn].append((time.perf_counter() - w) / N)
             ends[fn] = s.y
     assert np.array_equal(ends[by_advance], ends[compiled]), "the two loops must take the same steps"
-    adv, comp, nop, py, disp, ent = (min(times[f]) for f in (by_advance, compiled, noop, python_part, dispatch,
-                                                              straight))
+    adv, comp, nop, py, disp, ent, snap = (min(times[f]) for f in (by_advance, compiled, noop, python_part, dispatch,
+                                                                    straight, snapshots))
     sim = min(_timed(lambda: grapefmu.simulate(scene, 1e-3)) for _ in range(200))
     print(f"scene {path}, {N} steps of {DT * 1e3:g} ms, best of 7 (µs per call)")
     print(f"compiled call that integrates nothing (integrate(), ~40 arrays unboxed): {nop * 1e6:7.2f}")
@@ -96,6 +100,7 @@ def main(path: str) -> None:
     print(f"  of which Python (advance, its compiled call stubbed out):             {py * 1e6:7.2f}")
     print(f"  of which the compiled call (advance's arguments, nothing done):       {ent * 1e6:7.2f}")
     print(f"  (the same through numba's dispatcher, which advance skips):           {disp * 1e6:7.2f}")
+    print(f"Solver.snapshot():                                                      {snap * 1e6:7.2f}")
     print(f"simulate(scene, t_end = 1 ms), set-up and result assembly:              {sim * 1e6:7.1f}")
 
 

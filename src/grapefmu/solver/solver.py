@@ -117,7 +117,8 @@ class Solver:
                           s.contact_location == "step-control" and self.method == "event", th.bruise_force,
                           th.bruise_energy, th.detachment_force)
         self._closed: list[np.ndarray] = []
-        self._advance = None  # session.advance for advance's argument types (compiled.entry), on the first call
+        # session.advance and .refresh for the types a face's step passes them (compiled.entry), on the first call
+        self._advance = self._refresh = None
         # the state's arrays are views on _memory, so that a step's backup and rollback are one copy each
         self._memory, self.state = self._fresh_state(s.zeno_max_events, float(t_start))
         self._backup = np.zeros_like(self._memory)
@@ -209,7 +210,9 @@ class Solver:
 
         Its arrays are the solver's own (views on the state and buffers refreshed here, like MuJoCo's mjData
         after mj_forward): read them before the next step, copy what you keep. A face pays one compiled call."""
-        ses.refresh(self._session)
+        if self._refresh is None:
+            self._refresh = entry(ses.refresh, self._session)
+        self._refresh(self._session)
         snap = self._snapshot
         ledger(self.layout, self.state.physical.y, out=snap.ledger[0])
         return snap
