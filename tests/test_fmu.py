@@ -3,6 +3,7 @@ against `grapefmu simulate` on the same scene and inputs."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import zipfile
@@ -269,3 +270,20 @@ def test_cluster_fmu_has_summary_outputs_that_match_the_core(fmus):
     np.testing.assert_allclose(rows[:, 3], ref.contact_force[1:].max(axis=1), atol=1e-4)
     np.testing.assert_allclose(rows[:, 4], ref.pedicel_tension[1:].max(axis=1), atol=1e-4)
     np.testing.assert_array_equal(rows[:, 6], ref.active_pairs[1:])
+
+
+def test_the_benchmarks_fmu_run_leaves_no_temporary_files(tmp_path):
+    """`grapefmu bench` steps each scene's FMU through fmpy (grapefmu_fmu.bench_run): it built and unpacked 37 MB per
+    scene into temporary directories it never removed."""
+    text = default_scene_path().read_text()
+    assert "t_end = 2.5" in text
+    scene = tmp_path / "short.toml"
+    scene.write_text(text.replace("t_end = 2.5", "t_end = 0.01"))
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    r = subprocess.run([sys.executable, "-m", "grapefmu_fmu.bench_run", str(scene)], capture_output=True, text=True,
+                       timeout=600, env={**os.environ, "TMPDIR": str(tmp)})
+    assert r.returncode == 0, r.stderr[-2000:]
+    out = json.loads(r.stdout.split("JSON:", 1)[1])
+    assert len(out["angles"]) == 11 and np.isfinite(out["angles"]).all()
+    assert list(tmp.iterdir()) == []

@@ -29,7 +29,7 @@ def main(scene_path: str) -> None:
         md = read_model_description(str(fmu))
         vr = {v.name: v.valueReference for v in md.modelVariables}
         outs = [vr[f"angle_{b}"] for b in scene.model.names]
-        unzip = extract(str(fmu))
+        unzip = extract(str(fmu), Path(d) / "unzipped")  # fmpy's default, a fresh temporary directory, is never removed
         dt, steps = 1e-3, int(round(scene.solver.t_end / 1e-3))
         inputs = [vr[n] for n in INPUTS]
         u = held_inputs(scene.excitation, np.arange(steps) * dt).tolist()
