@@ -4,6 +4,7 @@ N times; a run that ends in SIGABRT counts. The same work without the FMU is the
 Run: .venv/bin/python benchmarks/fmu_exit_aborts.py [N]   (default 16)"""
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import tempfile
@@ -53,6 +54,7 @@ def aborts(args: list[str], n: int) -> int:
 def main() -> None:
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 16
     with tempfile.TemporaryDirectory() as d:
+        os.environ["TMPDIR"] = d  # fmpy's extract makes a directory per FMU and never removes it: here, it goes with d
         rows = []
         for v in (2, 3):
             fmu = Path(d) / f"default{v}.fmu"

@@ -38,6 +38,7 @@ def first_step(python: str, fmu: Path, cache: Path) -> float:
 
 def main() -> None:
     with tempfile.TemporaryDirectory() as d:
+        os.environ["TMPDIR"] = d  # fmpy's extract makes a directory per FMU and never removes it: here, it goes with d
         d = Path(d)
         fmu = d / "default.fmu"
         subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", "-o", str(fmu)], check=True, capture_output=True)

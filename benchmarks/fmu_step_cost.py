@@ -133,6 +133,7 @@ def core_cost() -> float:
 def main() -> None:
     import json
     with tempfile.TemporaryDirectory() as d:
+        os.environ["TMPDIR"] = d  # fmpy's extract makes a directory per FMU and never removes it: here, it goes with d
         d = Path(d)
         subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", "-o", str(d / "g.fmu")], check=True,
                        capture_output=True)
