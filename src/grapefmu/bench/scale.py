@@ -20,7 +20,7 @@ import numpy as np
 
 from .harness import machine
 from ..cluster.generate import DEFAULT_MOVES, ClusterSpec, RowSpec, cluster_scene, row_scene
-from ..model.model import ISLANDS_FROM
+from ..model.model import ISLANDS_FROM, runs_in_islands
 from ..scenefile import scene_from_dict
 from ..results.writers import atomic_path
 from ..solver import solver as solver_module
@@ -79,7 +79,7 @@ def interleave(rows: list[dict], scenes: list, passes: int = PASSES) -> None:
 
 def default(row: dict) -> float:
     """A size's cost the way `simulate` runs it with `solver.islands = "auto"` (model.runs_in_islands)."""
-    return row["islands"] if row["n"] >= ISLANDS_FROM else row["cost"]
+    return row["islands"] if runs_in_islands("auto", row["n"], "event", 0.0) else row["cost"]
 
 
 def in_islands(sc):
