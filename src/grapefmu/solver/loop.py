@@ -41,6 +41,7 @@ class Buffers(NamedTuple):
     pwbuf: np.ndarray    # (N_SAMPLES + 1, P) its dissipation power
     cls: np.ndarray      # (N_SAMPLES + 1, P) its mode class (smooth pairs)
     values: np.ndarray   # (N_SAMPLES + 1, 2P) its event functions
+    rates: np.ndarray    # (N_SAMPLES + 1, 2P) their slopes (δ's; per sample spacing)
     W: Workspace
     samples: np.ndarray  # (N_SAMPLES + 1, N) KINEMATICS: the berries at the step's samples
     travel: np.ndarray   # (N, 2) how far each berry can get in the step, rachis and world frame (broadphase.quiet)
@@ -57,7 +58,8 @@ def buffers(M, ny, island):
     p = max(M.pair.shape[0], 1)
     return Buffers(np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny),
                    np.zeros((N_SAMPLES + 1, p)), np.zeros((N_SAMPLES + 1, p)),
-                   np.zeros((N_SAMPLES + 1, p), dtype=np.int64), np.zeros((N_SAMPLES + 1, 2 * p)), workspace(M),
+                   np.zeros((N_SAMPLES + 1, p), dtype=np.int64), np.zeros((N_SAMPLES + 1, 2 * p)),
+                   np.zeros((N_SAMPLES + 1, 2 * p)), workspace(M),
                    samples_for(M), np.zeros((M.berry.shape[0], 2)), np.ones(p, dtype=np.bool_),
                    np.zeros((M.n_dof + 1 if island else 0, 3)), np.zeros(M.berry.shape[0] if island else 0),
                    np.zeros(M.berry.shape[0] if island else 0, np.int64),
@@ -211,7 +213,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         event = False
         if sampled and cfg.locate and B.count[0] > 0:
             theta_e, event = find_event(P.y, q, h, t0, M, C, B.near, B.count[0], Z.suspect, W.berry, samples,
-                                        values, work)
+                                        values, Z.rates, work)
         t_commit = t_new if not event or theta_e >= 1.0 else t0 + theta_e * h
         if R.cursor[0].grid_dt > 0.0 and not record_grid(t0, t_commit, h, P.y, q, X, inp, C, Bk.totals, R):
             return OUT_FULL
