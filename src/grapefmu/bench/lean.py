@@ -159,7 +159,7 @@ def simulate_lean(scene: Scene, *, rtol: float, atol: float, integrator: str = "
     C = np.zeros(npair, dtype=CONTACT)
     C["v_onset"] = HC_MIN_APPROACH_SPEED
     floats = np.zeros(3)
-    floats[SKIN] = float(np.mean([b.radius for b in m.berries])) if skin is None else skin
+    floats[SKIN] = m.mean_radius if skin is None else skin
     watch_all = skin is None and npair <= WATCH_ALL
     counts = np.zeros(3, dtype=np.int64)
     y = initial(layout_of(scene), scene)

@@ -210,6 +210,11 @@ class Model:
         return self.pairs[p].j >= self.n_berries
 
     @cached_property
+    def mean_radius(self) -> float:
+        """m: the berries' mean radius, which the broad phase's skin is a fraction of."""
+        return float(np.mean([b.radius for b in self.berries]))
+
+    @cached_property
     def obstacle_pairs(self) -> np.ndarray:
         """(P, O): 1.0 where pair p is a berry on obstacle o (sums per-pair quantities per obstacle)."""
         out = np.zeros((len(self.pairs), len(self.obstacles)))
@@ -342,6 +347,11 @@ class Scene:
             for name in part.dtype.names or (None,):  # field by field: a record's padding bytes are not data
                 h.update(np.ascontiguousarray(part if name is None else part[name]).tobytes())
         return h.digest()
+
+    @cached_property
+    def plane_normal(self) -> tuple[float, float, float] | None:
+        """Model.plane_normal under this scene's excitation, asked once per scene rather than once per Solver."""
+        return self.model.plane_normal(self.excitation)
 
     def free_to_turn(self) -> "Scene":
         """This scene with a rachis that may turn whatever its excitation does: a face's inputs may turn it."""

@@ -19,7 +19,7 @@ from .broadphase import keep_valid, quiet, rebuild, samples_for
 from .drift import drift
 from .events import N_SAMPLES, classify, find_event, switch_pair
 from .sampling import sample_step
-from .step import dense, dense_coefficients, dense_component, error_norm, initial_step, rk_step
+from .step import dense, dense_at, dense_coefficients, error_norm, initial_step, rk_step
 
 # statuses
 DONE, OUT_FULL, IMPACTS_FULL, MAX_STEPS, STEP_UNDERFLOW, NOT_FINITE, REFUSED = range(7)  # REFUSED: session.advance
@@ -103,11 +103,12 @@ def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
                 n += 1
         cur.n_changes = n
     ts, ys, accels, tots = R.t, R.y, R.accel, R.totals
+    ny, width = y0.shape[0], ys.shape[1]
+    flat = ys.reshape(ys.size)
     while kg <= last:
         tg = min(cur.grid_t0 + kg * dt_out, t_commit)
         theta = (tg - t0) / h
-        for r in range(y0.shape[0]):  # element by element: a row view costs reference counts per sample
-            ys[o, r] = dense_component(theta, y0, q, h, r)
+        dense_at(theta, y0, q, h, flat, o * width, ny)
         ts[o] = tg
         accels[o, 0], accels[o, 1], accels[o, 2], accels[o, 3], accels[o, 4], accels[o, 5] = applied_accel(
             X, inp, tg, t0)

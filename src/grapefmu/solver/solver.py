@@ -107,10 +107,10 @@ class Solver:
         self.M = scene.arrays
         self.excitation = scene.excitation.arrays
         self.layout = layout_of(scene)
-        n = self.model.plane_normal(scene.excitation)
+        n = scene.plane_normal
         self._plane_normal = None if n is None else tuple(float(c) for c in n)  # floats: off_axis without numpy
         if skin is None:
-            skin = SKIN_FRACTION * float(self.M.berry["radius"].mean())
+            skin = SKIN_FRACTION * self.model.mean_radius
         th = scene.thresholds
         self.config = np.zeros(1, dtype=st.CONFIG)
         self.config[0] = (self.rtol, self.atol, self.fixed_step, s.zeno_window,
@@ -144,8 +144,7 @@ class Solver:
     def _fingerprint(self) -> int:
         """The model, method and settings a state belongs to, as one number."""
         h = hashlib.blake2b(self.scene.digest, digest_size=8)
-        for name in self.config.dtype.names:  # field by field: a record's padding bytes are not data
-            h.update(self.config[name].tobytes())
+        h.update(self.config.tobytes())  # CONFIG is packed: its bytes are its fields' bytes, in order
         h.update(self.method.encode())
         return int.from_bytes(h.digest(), "little")
 
@@ -399,7 +398,8 @@ class Solver:
     def _changes(rec: st.Recorder, offset: int) -> np.ndarray:
         """The contact changes a recorder holds, their sample indices counted from the run's first sample."""
         out = rec.changes[: int(rec.cursor["n_changes"][0])].copy()
-        out["sample"] += offset
+        if offset:
+            out["sample"] += offset
         return out
 
 

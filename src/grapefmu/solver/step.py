@@ -19,8 +19,22 @@ def dense(theta, y0, q, h, out):
 @inline
 def dense_head(theta, y0, q, h, out, m):
     """dense() for the first m components only (the angles and rates that events and forces need)."""
-    for r in range(m):
-        out[r] = dense_component(theta, y0, q, h, r)
+    dense_at(theta, y0, q, h, out, 0, m)
+
+
+@inline
+def dense_at(theta, y0, q, h, out, at, m):
+    """out[at + r] = dense()[r] for r < m: a row of the output grid is written through its flat index (a row view
+    costs reference counts per sample)."""
+    r = 0
+    while r + 4 <= m:
+        a0, a1, a2, a3 = horner4(theta, q, r)
+        out[at + r], out[at + r + 1], out[at + r + 2], out[at + r + 3] = \
+            y0[r] + h * a0, y0[r + 1] + h * a1, y0[r + 2] + h * a2, y0[r + 3] + h * a3
+        r += 4
+    while r < m:
+        out[at + r] = dense_component(theta, y0, q, h, r)
+        r += 1
 
 
 @inline
@@ -43,6 +57,21 @@ def dense_rachis(theta, y0, q, h, out, M):
     off = model_offsets(M)
     for r in range(off[0], off[4]):
         out[r] = dense_component(theta, y0, q, h, r)
+
+
+@inline
+def horner4(theta, q, r):
+    """Σ_j Q[r + i, j] θ^(j+1) for i = 0..3, dense_component's sums for four components with their Horner chains
+    interleaved: each chain waits on its own multiplications, so four take about the time of one (an output sample
+    of the 14-component paper collision scene: 23 against 42 ns). The same operations in the same order, so the
+    same numbers."""
+    a0 = a1 = a2 = a3 = 0.0
+    for j in range(q.shape[1] - 1, -1, -1):
+        a0 = (a0 + q[r, j]) * theta
+        a1 = (a1 + q[r + 1, j]) * theta
+        a2 = (a2 + q[r + 2, j]) * theta
+        a3 = (a3 + q[r + 3, j]) * theta
+    return a0, a1, a2, a3
 
 
 @inline
