@@ -93,8 +93,8 @@ def test_grazing_contact_inside_one_step_is_found():
 def test_a_graze_just_after_a_steps_start_is_found(monkeypatch, rtol):
     """The grazing scene's third touch is 0.5 µm deep and peaks 6.5 ms after the start of a 56 ms DOP853 step, whose
     start is its largest sample of δ: the samples' rates (events.graze_possible) must find it, against the
-    reference's three impacts. DOP853 is forced at these tolerances (the default picks DOPRI5 at 1e-6), where it
-    used to book two."""
+    reference's three impacts. DOP853 is forced at these tolerances (the default steps them with DOPRI5), where
+    it used to book two."""
     from grapefmu.bench.scenes import bench_scenes, build
     from grapefmu.solver import solver as solver_module
     from grapefmu.solver.tableau import DOP853
