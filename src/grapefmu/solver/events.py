@@ -229,17 +229,15 @@ def find_event(y0, q, h, t0, M, contacts, near, n_near, suspect, kin, samples, v
                     break
             for k in range(N_SAMPLES + 1):
                 lo = max(k - 1, 0)
-                hi = min(k + 1, N_SAMPLES)
                 if lo / N_SAMPLES >= best:
                     break
                 if a == 0:  # δ: the sub-interval [k - 1, k], judged on its ends' values and slopes
-                    if k == 0:
-                        continue
                     hi = k
                     va, vb = values[lo, col], values[hi, col]
-                    if va > 0.0 or vb > 0.0 or not graze_possible(va, vb, rates[lo, col], rates[hi, col]):
+                    if k == 0 or va > 0.0 or vb > 0.0 or not graze_possible(va, vb, rates[lo, col], rates[hi, col]):
                         continue
-                else:
+                else:  # φ: around a sampled local maximum
+                    hi = min(k + 1, N_SAMPLES)
                     v = values[k, col]
                     if v > 0.0 or v < values[lo, col] or v < values[hi, col]:
                         continue

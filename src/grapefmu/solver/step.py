@@ -62,9 +62,9 @@ def dense_rachis(theta, y0, q, h, out, M):
 @inline
 def horner4(theta, q, r):
     """Σ_j Q[r + i, j] θ^(j+1) for i = 0..3, dense_component's sums for four components with their Horner chains
-    interleaved: each chain waits on its own multiplications, so four take about the time of one (an output sample
-    of the 14-component paper collision scene: 23 against 42 ns). The same operations in the same order, so the
-    same numbers."""
+    interleaved: each chain waits on its own multiplications, so four take about the time of one (the paper collision
+    scene's 1 ms output grid: 53 to 35–38 ns a sample, benchmarks/run_breakdown.py). The same operations in the same
+    order, so the same numbers."""
     a0 = a1 = a2 = a3 = 0.0
     for j in range(q.shape[1] - 1, -1, -1):
         a0 = (a0 + q[r, j]) * theta
