@@ -72,18 +72,20 @@ def t_quiet(n, M, X, TB, S, config, Z, h, sampled):
 
 
 @nb.njit
-def t_sample_step(n, M, X, TB, S, config, Z, h, sampled):
+def t_sample_step(n, M, X, TB, S, config, Z, h, kind):
+    """kind: 0 a quiet step, 1 a sampled one, 2 a quiet step whose start the last step sampled (its end)."""
     P, B, Bk = S.physical, S.broad_phase, S.book
     for _ in range(n):
         sample_step(P.t[0], h, 1.0, P.y, S.integrator.dense, M, X, S.input[0], P.contacts, B.near, B.count[0],
                     Bk.totals, Bk.pair, Bk.peak_tension, config[0], Z.W, Z.work, Z.fbuf, Z.pwbuf, Z.cls, Z.samples,
-                    sampled)
+                    kind == 1, kind == 2)
 
 
 STAGES = [("one RHS", t_rhs, False), ("kinematics (stage 1 alone)", t_kinematics, False),
           ("rk_step (the stages' RHS)", t_rk_step, False), ("error_norm", t_error_norm, False),
           ("dense_coefficients", t_dense_coefficients, False), ("quiet (travel bound)", t_quiet, False),
-          ("sample_step, quiet step", t_sample_step, False), ("sample_step, sampled step", t_sample_step, True)]
+          ("sample_step, quiet step", t_sample_step, 0), ("sample_step, sampled step", t_sample_step, 1),
+          ("sample_step, quiet step after a whole one", t_sample_step, 2)]
 
 
 def main(argv: list[str]) -> None:

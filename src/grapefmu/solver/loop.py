@@ -144,6 +144,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
     nbreak = 0 if inp.held else X.breaks.shape[0]  # a held input has no breakpoints
     steps = 0
     start_known = False  # whether samples[0] holds the berries at P.y (a whole step's end: the step's FSAL stage)
+    start_sampled = False  # whether sample_step booked P.y as the last step's end, in the modes and near list now
     while P.t[0] < t_target:
         if steps >= max_steps:
             return MAX_STEPS
@@ -207,6 +208,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
                 continue
             if far == np.inf:  # the list was rebuilt: quiet() screened another one
                 Z.suspect[:] = True
+                start_sampled = False
         else:
             cnt.quiet_steps += 1
         cnt.near_pairs_sum += B.count[0]
@@ -219,7 +221,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         if R.cursor[0].grid_dt > 0.0 and not record_grid(t0, t_commit, h, P.y, q, X, inp, C, Bk.totals, R):
             return OUT_FULL
         sample_step(t0, h, theta_e, P.y, q, M, X, inp, C, B.near, B.count[0], Bk.totals, Bk.pair, Bk.peak_tension, cfg,
-                    W, work, fbuf, pwbuf, cls, samples, sampled)
+                    W, work, fbuf, pwbuf, cls, samples, sampled, start_sampled)
         # --- commit
         I.y_prev[:] = P.y
         if event:
@@ -238,17 +240,22 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         opened = Bk.totals[0].collision_count
         changed = B.count[0] > 0 and switch_modes(t_commit, event, P.y, M, C, Bk, B, cfg, R.impacts, R.cursor,
                                                   W.berry, cls, Z.suspect)
+        # a whole step's end was sampled (sample_step); the next step's start is it while nothing switched, the list
+        # was not rebuilt and no breakpoint moved the acceleration (step control switches smooth pairs silently)
+        start_sampled = not event and not cfg.step_control
         if far > 0.25 * cfg.skin:
             # rebuild early, from where the step ended, so the list stays valid for the next steps
             kinematics(P.y, M, W.berry)
             rebuild(M, C, Bk, B, W.berry, cfg.skin)
             changed = changed or cfg.step_control  # only step control ties smooth flags to the list
+            start_sampled = False
         if changed or event or (bi < nbreak and t_commit >= X.breaks[bi]):
             rhs(t_commit, t_commit, P.y, I.f, C, M, X, inp, W, B.near, B.count[0])
             cnt.rhs_evaluations += 1
             if not start_known:  # after an event: the berries at the next step's start are this evaluation's
                 copy_kinematics(W.berry, samples[0])
                 start_known = True
+            start_sampled = False
         else:
             I.f[:] = I.stages[ns]
         if not fixed:

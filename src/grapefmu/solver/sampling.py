@@ -58,7 +58,7 @@ def integrate_gauss(h, theta_end, y0, q, M, contacts, near, nnear, book_pair, ki
 
 @jit
 def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, totals, book_pair, peak_tension, cfg, W,
-                work, fbuf, pwbuf, cls, samples, sampled):
+                work, fbuf, pwbuf, cls, samples, sampled, start_sampled):
     """Book the step up to θ = theta_end.
 
     Every berry's pedicel tension is sampled at θ = k / N_SAMPLES inside the committed part (its end is the next
@@ -66,12 +66,18 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
     but at the step's ends, which the loop keeps in samples.
     The active pairs' forces, for the quadrature and the peak, are sampled on N_SAMPLES + 1 points of the committed
     part: on a whole step the same points, on a step an event cut short each pair on its own (pair_at), so a
-    cluster's event step evaluates the pairs in contact and not every berry again."""
+    cluster's event step evaluates the pairs in contact and not every berry again.
+    start_sampled: this step's start is the last step's end, sampled there in the same modes on the same near list
+    (loop.integrate), so its tensions are booked and its pairs' row is that step's last: copied, not evaluated again
+    (a fifth of the samples on a step that follows a whole one)."""
     tot = totals[0]
     berry, kin = M.berry, W.berry
     span = theta_end * h
     whole = theta_end == 1.0
-    for k in range(N_SAMPLES + 1):
+    if start_sampled:
+        for kk in range(nnear):
+            fbuf[0, kk], pwbuf[0, kk], cls[0, kk] = fbuf[N_SAMPLES, kk], pwbuf[N_SAMPLES, kk], cls[N_SAMPLES, kk]
+    for k in range(1 if start_sampled else 0, N_SAMPLES + 1):
         th = k / N_SAMPLES
         if not whole and k > 0 and th >= theta_end:
             break

@@ -161,19 +161,17 @@ def error_norm(h, y, ynew, TB, stages, cfg, err, scale, acc):
     """The embedded estimate's RMS norm against atol + rtol·max(|y|, |y_new|) (inf if y_new is not finite).
     With a third-order estimate (DOP853) the fifth-order one is tempered by it as in scipy:
     |h|·‖e5‖² / √((‖e5‖² + 0.01‖e3‖²)·n), so a fifth-order estimate that vanishes by accident does not pass."""
-    for r in range(ynew.shape[0]):
-        if not math.isfinite(ynew[r]):
-            return np.inf
     n_fsal = TB.b.shape[0] + 1
     combine(TB.e, stages, n_fsal, acc)
+    s5 = 0.0  # rms_norm's sum, in its order, in the pass that forms err and scale
     for r in range(y.shape[0]):
+        if not math.isfinite(ynew[r]):
+            return np.inf
         err[r] = h * acc[r]
         scale[r] = cfg.atol + cfg.rtol * max(abs(y[r]), abs(ynew[r]))
-    if TB.e3.shape[0] == 0:
-        return rms_norm(err, scale)
-    s5 = 0.0
-    for r in range(y.shape[0]):
         s5 += (err[r] / scale[r]) ** 2
+    if TB.e3.shape[0] == 0:
+        return math.sqrt(s5 / y.shape[0])
     combine(TB.e3, stages, n_fsal, acc)
     s3 = 0.0
     for r in range(y.shape[0]):
@@ -196,7 +194,25 @@ def dense_coefficients(t0, h, y, args, TB, stages, q, tmp, acc):
         for r in range(ny):
             tmp[r] = y[r] + h * acc[r]
         rhs_inline(t0 + TB.c_extra[i] * h, t0, tmp, stages[st], C, M, X, inp, W, pairs, n_pairs)
-    for j in range(TB.p.shape[1]):
-        combine(TB.p[:, j], stages, TB.p.shape[0], acc)
-        for r in range(acc.shape[0]):
-            q[r, j] = acc[r]
+    # q[r, j] = Σ_m P[m, j] stages[m, r], each summed from 0.0 in m order as combine() sums a column: four columns
+    # at a time in registers (a column per combine() pass cost DOPRI5's four passes over the stages)
+    P = TB.p
+    nm, nq = P.shape
+    for r in range(ny):
+        j = 0
+        while j + 4 <= nq:
+            a0 = a1 = a2 = a3 = 0.0
+            for m in range(nm):
+                s = stages[m, r]
+                a0 += P[m, j] * s
+                a1 += P[m, j + 1] * s
+                a2 += P[m, j + 2] * s
+                a3 += P[m, j + 3] * s
+            q[r, j], q[r, j + 1], q[r, j + 2], q[r, j + 3] = a0, a1, a2, a3
+            j += 4
+        while j < nq:
+            a0 = 0.0
+            for m in range(nm):
+                a0 += P[m, j] * stages[m, r]
+            q[r, j] = a0
+            j += 1
