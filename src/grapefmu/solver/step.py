@@ -194,25 +194,7 @@ def dense_coefficients(t0, h, y, args, TB, stages, q, tmp, acc):
         for r in range(ny):
             tmp[r] = y[r] + h * acc[r]
         rhs_inline(t0 + TB.c_extra[i] * h, t0, tmp, stages[st], C, M, X, inp, W, pairs, n_pairs)
-    # q[r, j] = Σ_m P[m, j] stages[m, r], each summed from 0.0 in m order as combine() sums a column: four columns
-    # at a time in registers (a column per combine() pass cost DOPRI5's four passes over the stages)
-    P = TB.p
-    nm, nq = P.shape
-    for r in range(ny):
-        j = 0
-        while j + 4 <= nq:
-            a0 = a1 = a2 = a3 = 0.0
-            for m in range(nm):
-                s = stages[m, r]
-                a0 += P[m, j] * s
-                a1 += P[m, j + 1] * s
-                a2 += P[m, j + 2] * s
-                a3 += P[m, j + 3] * s
-            q[r, j], q[r, j + 1], q[r, j + 2], q[r, j + 3] = a0, a1, a2, a3
-            j += 4
-        while j < nq:
-            a0 = 0.0
-            for m in range(nm):
-                a0 += P[m, j] * stages[m, r]
-            q[r, j] = a0
-            j += 1
+    for j in range(TB.p.shape[1]):
+        combine(TB.p[:, j], stages, TB.p.shape[0], acc)
+        for r in range(acc.shape[0]):
+            q[r, j] = acc[r]
