@@ -28,6 +28,7 @@ class Observation(NamedTuple):
     energy: np.ndarray           # (S, 5) J: ENERGY_TERMS
 
 
+@jit
 def empty(n_samples: int, n_berries: int, n_dof: int, n_pairs: int) -> Observation:
     s, n, p = n_samples, n_berries, n_pairs
     return Observation(np.zeros((s, n_dof)), np.zeros((s, n)), np.zeros((s, n, 3)), np.zeros((s, p)),

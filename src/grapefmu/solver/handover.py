@@ -15,7 +15,7 @@ from numba import literal_unroll
 from ..physics.compiled import inline, jit
 from ..physics.layout import model_offsets
 from ..results.records import COUNTS, PEAKS
-from .solver import restart
+from .session import restart
 from .state import BOOK_COUNTERS
 
 #: the work counters' names (BOOK_COUNTERS), for literal_unroll

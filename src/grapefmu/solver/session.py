@@ -13,20 +13,25 @@ from numba.experimental import structref
 from numba.extending import overload
 from numba.typed import List
 
+from ..model.contact import HC_MIN_APPROACH_SPEED, Law
 from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from ..model.model import BERRY, COUPLING, PAIR, ModelArrays
 from ..physics.compiled import jit
 from ..physics.dynamics import rhs
 from ..physics.excitation import applied_accel
 from ..physics.layout import model_offsets, offsets
-from ..physics.kinematics import workspace
-from ..physics.observe import observe
+from ..physics.kinematics import kinematics, workspace
+from ..physics.observe import empty, observe
+from .broadphase import rebuild
 from .drift import anchor, predict
+from .events import classify, open_impact
 from .loop import DONE, REFUSED, buffers, integrate
 from .state import CHANGE, TOTALS, Recorder, recorder, zeros
 
-__all__ = ["Session", "advance", "derivative", "grow", "island", "labels", "listed", "new", "preview", "previews",
-           "put", "refresh", "resume", "rollback", "run", "take_impacts", "take_last", "views", "windows"]
+__all__ = ["Session", "advance", "derivative", "grow", "island", "labels", "listed", "preview", "previews", "put",
+           "refresh", "restart", "resume", "rollback", "run", "start", "take_impacts", "take_last", "views", "windows"]
+
+_KELVIN_VOIGT = int(Law.KELVIN_VOIGT)
 
 
 @structref.register
@@ -63,12 +68,45 @@ def _new_impl(model, excitation, tableau, config, state, scratch, buffers, memor
 
 
 @jit
-def new(model, excitation, tableau, config, state, scratch, memory, backup, now):
-    """A Session over these arrays (shared, not copied: the Solver keeps its numpy views of them) and the loop's
-    buffers (loop.Buffers, made here: Python never reads them); `now` is (Observation, accel (1, 6), in_contact
-    (1, P)) of one sample: what `refresh` fills."""
-    return _new(model, excitation, tableau, config, state, scratch, buffers(model, state.physical.y.shape[0], False),
-                memory, backup, now)
+def start(model, excitation, tableau, config, y, t, fingerprint, zeno_max):
+    """A Session over the state at time t with y, started: every pair's mode from y (a pair that starts in contact
+    opens an impact at t), the first near list and the derivative; with the state's backup, a one-sample scratch
+    recorder, the loop's buffers and a one-sample `now` (Observation, accel (1, 6), in_contact (1, P)): what
+    `refresh` fills. One compiled call, where five unboxed the model and state again and again and boxed what
+    Python never reads (docs/solver.md, "A Solver starts in one call"); `views` gives Python the arrays it reads."""
+    n, npair, ny = model.berry.shape[0], model.pair.shape[0], y.shape[0]
+    memory, S = zeros(ny, npair, n, tableau.p.shape[0], tableau.p.shape[1], zeno_max)
+    S.physical.t[0] = t
+    S.physical.y[:] = y
+    S.integrator.y_prev[:] = y
+    S.fingerprint[0] = fingerprint
+    S.book.totals[0].peak_pedicel_tension = -np.inf
+    S.book.peak_tension[:] = -np.inf
+    S.book.ring[:] = -np.inf
+    C, W = S.physical.contacts, workspace(model)
+    for p in range(npair):
+        C[p].v_onset = HC_MIN_APPROACH_SPEED
+        if config[0].step_control and model.pair[p].law != _KELVIN_VOIGT:
+            S.book.pair[p].smooth_until = np.inf  # no force jump at onset
+    for p in range(npair):
+        mode, ddot = classify(p, y, model, C, W.berry, 0)
+        C[p].mode = mode
+        if mode != 0:
+            open_impact(S.book.pair[p], S.book.totals[0], t, ddot)
+    restart(S, model, excitation, config[0].skin)
+    S.book.counters[0].near_list_rebuilds = 0
+    now = (empty(1, n, model.n_dof, npair), np.zeros((1, 6)), np.zeros((1, npair), np.bool_))
+    return _new(model, excitation, tableau, config, S, recorder(1, ny, npair, max(npair, 1) * 4),
+                buffers(model, ny, False), memory, np.zeros_like(memory), now)
+
+
+@jit
+def restart(S, M, X, skin):
+    """A near list and the derivative for a state whose modes are set (a start, or an island formed from others)."""
+    W = workspace(M)
+    kinematics(S.physical.y, M, W.berry)
+    rebuild(M, S.physical.contacts, S.book, S.broad_phase, W.berry, skin)
+    derivative(S, M, X)
 
 
 @jit
@@ -127,8 +165,8 @@ def rollback(s, saved):
 
 @jit
 def views(s):
-    """(state, recorder) of session s as Python reads them (views, not copies): for callers that inspect an island."""
-    return s.state, s.scratch
+    """(state, scratch recorder, memory, backup, now) of session s as Python reads them (views, not copies)."""
+    return s.state, s.scratch, s.memory, s.backup, s.now
 
 
 @jit

@@ -15,13 +15,11 @@ from collections.abc import Callable
 import numpy as np
 
 from ..errors import SolverError
-from ..model.contact import HC_MIN_APPROACH_SPEED, Law
 from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from ..model.model import Scene, off_axis
 from ..physics import observe as obs
-from ..physics.compiled import entry, jit
+from ..physics.compiled import entry
 from ..physics.excitation import ACCEL_COMPONENTS, base_accel
-from ..physics.kinematics import kinematics, workspace
 from ..physics.layout import LEDGER_TERMS, angular_velocity, initial, ledger, layout_of, orientation
 from ..results import catalogue
 from ..results.contacts import ContactLog
@@ -30,8 +28,6 @@ from ..results.records import concat
 from ..results.run import Run
 from . import session as ses
 from . import state as st
-from .broadphase import rebuild
-from .events import classify, open_impact
 from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW
 from .tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5, Tableau
 
@@ -56,31 +52,6 @@ STATUS_TEXT = {
     STEP_UNDERFLOW: "the step size fell below the resolution of time (the problem is too stiff for this tolerance)",
     NOT_FINITE: "the state became NaN or infinite",
 }
-
-
-@jit
-def _start(S, M, X, skin):
-    """Modes from the initial state (a pair that starts in contact opens an impact at the start time),
-    the first near list and the derivative."""
-    C = S.physical.contacts
-    t = S.physical.t[0]
-    W = workspace(M)
-    for p in range(C.shape[0]):
-        mode, ddot = classify(p, S.physical.y, M, C, W.berry, 0)
-        C[p].mode = mode
-        if mode != 0:
-            open_impact(S.book.pair[p], S.book.totals[0], t, ddot)
-    restart(S, M, X, skin)
-    S.book.counters[0].near_list_rebuilds = 0
-
-
-@jit
-def restart(S, M, X, skin):
-    """A near list and the derivative for a state whose modes are set (a start, or an island formed from others)."""
-    W = workspace(M)
-    kinematics(S.physical.y, M, W.berry)
-    rebuild(M, S.physical.contacts, S.book, S.broad_phase, W.berry, skin)
-    ses.derivative(S, M, X)
 
 
 class Solver:
@@ -121,27 +92,13 @@ class Solver:
         self._closed: list[np.ndarray] = []
         # session.advance and .refresh for the types a face's step passes them (compiled.entry), on the first call
         self._advance = self._refresh = None
+        self._session = ses.start(self.M, self.excitation, self.tableau, self.config, initial(self.layout, scene),
+                                  float(t_start), np.uint64(self._fingerprint()), s.zeno_max_events)
         # the state's arrays are views on _memory, so that a step's backup and rollback are one copy each
-        self._memory, self.state = self._fresh_state(s.zeno_max_events, float(t_start))
-        self._backup = np.zeros_like(self._memory)
-        self._scratch = st.recorder(1, self.layout.size, len(self.model.pairs), max(len(self.model.pairs), 1) * 4)
-        m, lay, y = self.model, self.layout, self.state.physical.y
-        now = (obs.empty(1, m.n_berries, m.n_dof, len(m.pairs)), np.zeros((1, 6)), np.zeros((1, len(m.pairs)), bool))
-        self._session = ses.new(self.M, self.excitation, self.tableau, self.config, self.state, self._scratch,
-                                self._memory, self._backup, now)
-        observation, accel, in_contact = now
-        self._snapshot = catalogue.Snapshot(self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel,
-                                            y[None, lay.base], angular_velocity(lay, y[None]),
-                                            orientation(lay, y[None]), np.zeros((1, len(LEDGER_TERMS))),
-                                            self.state.book.totals, observation, m.obstacle_pairs)
+        self.state, self._scratch, self._memory, self._backup, self._now = ses.views(self._session)
+        self._snapshot: catalogue.Snapshot | None = None  # made by the first snapshot()
 
     # --- state -----------------------------------------------------------------------------------
-    def _fresh_state(self, zeno_max: int, t_start: float) -> tuple[np.ndarray, st.SolverState]:
-        memory, S = blank_state(self.layout, self.tableau, self.M, self.config, zeno_max, t_start,
-                                self._fingerprint(), initial(self.layout, self.scene))
-        _start(S, self.M, self.excitation, self.config["skin"][0])
-        return memory, S
-
     def _fingerprint(self) -> int:
         """The model, method and settings a state belongs to, as one number."""
         h = hashlib.blake2b(self.scene.digest, digest_size=8)
@@ -215,6 +172,13 @@ class Solver:
             self._refresh = entry(ses.refresh, self._session)
         self._refresh(self._session)
         snap = self._snapshot
+        if snap is None:
+            m, lay, y = self.model, self.layout, self.state.physical.y
+            observation, accel, in_contact = self._now
+            snap = self._snapshot = catalogue.Snapshot(
+                self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel, y[None, lay.base],
+                angular_velocity(lay, y[None]), orientation(lay, y[None]), np.zeros((1, len(LEDGER_TERMS))),
+                self.state.book.totals, observation, m.obstacle_pairs)
         ledger(self.layout, self.state.physical.y, out=snap.ledger[0])
         return snap
 
@@ -402,23 +366,6 @@ class Solver:
         if offset:
             out["sample"] += offset
         return out
-
-
-def blank_state(lay, tableau: Tableau, M, config: np.ndarray, zeno_max: int, t: float, fingerprint: int,
-                y: np.ndarray) -> tuple[np.ndarray, st.SolverState]:
-    """A state at time t with y, every pair apart and nothing booked (modes, near list and derivative unset), as
-    views on one buffer (state.zeros; returned first)."""
-    memory, S = st.zeros(lay.size, M.pair.shape[0], lay.n, tableau.p.shape[0], tableau.p.shape[1], zeno_max)
-    S.physical.t[0] = t
-    S.physical.y[:] = S.integrator.y_prev[:] = y
-    S.physical.contacts["v_onset"] = HC_MIN_APPROACH_SPEED
-    S.book.totals["peak_pedicel_tension"] = -np.inf
-    S.book.peak_tension[:] = -np.inf
-    S.book.ring[:] = -np.inf
-    S.fingerprint[0] = fingerprint
-    if config["step_control"][0]:
-        S.book.pair["smooth_until"][M.pair["law"] != Law.KELVIN_VOIGT] = np.inf  # no force jump at onset
-    return memory, S
 
 
 def open_impacts(contacts: np.ndarray, book_pair: np.ndarray, t: float) -> np.ndarray:

@@ -23,8 +23,8 @@ from typing import NamedTuple
 from ..model.model import Scene, runs_in_islands
 
 #: the first compile of the core on a cold cache, s, on the fastest and slowest machine measured (README.md: two
-#: cores each, `NUMBA_CACHE_DIR` empty): a range, because one machine took twice as long as the other
-COMPILE_SECONDS = (90, 180)
+#: cores each, `NUMBA_CACHE_DIR` empty): a range, because the slowest took four times as long as the fastest
+COMPILE_SECONDS = (90, 400)
 NOTICE = ("grapefmu: compiling the core once ({seconds[0]} to {seconds[1]} s on two cores); later runs load it from "
           "the cache")
 
@@ -38,8 +38,8 @@ def _entry_points() -> tuple:
     """The compiled functions a run starts from: everything else is compiled (or loaded) with them."""
     from ..physics.observe import observe
     from .loop import integrate
-    from .solver import _start
-    return integrate, _start, observe
+    from .session import start
+    return integrate, start, observe
 
 
 def cache_is_cold() -> bool:
