@@ -132,7 +132,7 @@ def main() -> None:
     it = isl.Islands(sc)
     it.run(0.05)
     seg = next(s for s in it.batch.segs if len(s.members) == 1)
-    state, rec = ses.views(seg.system.session)[:2]
+    state, rec = ses.views(seg.system.session)[0], ses.outputs(seg.system.session)[0]
     rec.cursor["grid_dt"] = 0.0  # no output samples: the steps alone
     before = int(state.book.counters["steps"][0])
     t = time.perf_counter()

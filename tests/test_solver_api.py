@@ -1,6 +1,8 @@
 """The stepping interface the FMU and the ROS node rely on."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -194,6 +196,35 @@ def test_a_corrupted_state_is_refused_naming_the_field_and_the_solver_goes_on(co
     s.advance(0.1)
     twin.advance(0.1)
     np.testing.assert_array_equal(s.y, twin.y)
+
+
+@pytest.mark.parametrize("name, field, value, refused", [
+    ("book.pair", "impulse", np.nan, True), ("book.pair", "onset", np.inf, True),
+    ("book.pair", "smooth_until", np.inf, False), ("book.pair", "smooth_until", np.nan, True),
+    ("input", "alpha_y", -np.inf, True),  # a packed record: its floats are off the 8-byte lines
+    ("book.totals", "peak_pedicel_tension", -np.inf, False), ("book.totals", "peak_contact_force", np.inf, True),
+    ("integrator.clock", "h_last", np.nan, True), ("book.ring", None, -np.inf, False), ("physical.y", None, np.inf, True),
+])
+def test_each_float_field_is_checked_by_its_own_rule(collision_scene, name, field, value, refused):
+    """set_state gathers a record's float fields from its bytes in one go: each field must still be refused by its
+    own name, and only the fields that may be infinite (state.MAY_BE_INFINITE) let an infinity through."""
+    from grapefmu.solver.state import MAY_BE_INFINITE, unflatten
+    s = Solver(collision_scene)
+    s.advance(0.3)
+    good = s.get_state()
+    arrays = {k: v.copy() for k, v in flatten(good).items()}
+    a = arrays[name]
+    target = a[field] if field else a
+    target.flat[-1] = value
+    dotted = f"{name}.{field}" if field else name
+    assert refused == (np.isnan(value) or dotted not in MAY_BE_INFINITE)  # the table agrees with the rule
+    if refused:
+        with pytest.raises(StateError, match=re.escape(f"state {dotted}: ")):
+            s.set_state(unflatten(arrays))
+        assert same_state(good, s.state)
+    else:
+        s.set_state(unflatten(arrays))
+        assert same_state(unflatten(arrays), s.state)
 
 
 def test_a_state_from_another_scene_is_refused(collision_scene):

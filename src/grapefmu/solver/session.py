@@ -29,7 +29,8 @@ from .loop import DONE, REFUSED, buffers, integrate
 from .state import CHANGE, TOTALS, Recorder, recorder, zeros
 
 __all__ = ["Session", "advance", "derivative", "grow", "island", "labels", "listed", "preview", "previews", "put",
-           "refresh", "restart", "resume", "rollback", "run", "start", "take_impacts", "take_last", "views", "windows"]
+           "outputs", "recording", "refresh", "restart", "resume", "rollback", "run", "start", "take_impacts",
+           "take_last", "views", "windows"]
 
 _KELVIN_VOIGT = int(Law.KELVIN_VOIGT)
 
@@ -73,7 +74,8 @@ def start(model, excitation, tableau, config, y, t, fingerprint, zeno_max):
     opens an impact at t), the first near list and the derivative; with the state's backup, a one-sample scratch
     recorder, the loop's buffers and a one-sample `now` (Observation, accel (1, 6), in_contact (1, P)): what
     `refresh` fills. One compiled call, where five unboxed the model and state again and again and boxed what
-    Python never reads (docs/solver.md, "A Solver starts in one call"); `views` gives Python the arrays it reads."""
+    Python never reads (docs/solver.md, "A Solver starts in one call"); `views` and `outputs` give Python the
+    arrays it reads."""
     n, npair, ny = model.berry.shape[0], model.pair.shape[0], y.shape[0]
     memory, S = zeros(ny, npair, n, tableau.p.shape[0], tableau.p.shape[1], zeno_max)
     S.physical.t[0] = t
@@ -165,8 +167,34 @@ def rollback(s, saved):
 
 @jit
 def views(s):
-    """(state, scratch recorder, memory, backup, now) of session s as Python reads them (views, not copies)."""
-    return s.state, s.scratch, s.memory, s.backup, s.now
+    """(state, memory, backup) of session s as Python reads them (views, not copies)."""
+    return s.state, s.memory, s.backup
+
+
+@jit
+def outputs(s):
+    """(scratch recorder, now) of session s: what a face reads after a step, boxed only for one (each array numba
+    hands Python costs about a microsecond, and a whole run reads neither)."""
+    return s.scratch, s.now
+
+
+@jit
+def recording(s, samples, dt_out):
+    """A recorder for `samples` samples on the output grid every dt_out from the current time, holding the first:
+    the state now (time, y, the rachis' acceleration acting, totals) and each pair's contact record (what the
+    samples from here on hold). Solver.run's; one call where Python set the fields one by one."""
+    S = s.state
+    t, y, npair = S.physical.t[0], S.physical.y, S.physical.contacts.shape[0]
+    R = recorder(samples, y.shape[0], npair, max(npair, 1) * 256)
+    cur = R.cursor[0]
+    cur.grid_t0, cur.grid_dt, cur.grid_k, cur.n_out = t, dt_out, 1, 1
+    R.t[0] = t
+    R.y[0] = y
+    R.accel[0, 0], R.accel[0, 1], R.accel[0, 2], R.accel[0, 3], R.accel[0, 4], R.accel[0, 5] = applied_accel(
+        s.excitation, S.input[0], t, t)
+    R.totals[0] = S.book.totals[0]
+    R.logged[:] = S.physical.contacts
+    return R
 
 
 @jit

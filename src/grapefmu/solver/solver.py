@@ -7,6 +7,7 @@ whole state exactly, solver internals included. Every failure leaves the state a
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import time
@@ -95,8 +96,14 @@ class Solver:
         self._session = ses.start(self.M, self.excitation, self.tableau, self.config, initial(self.layout, scene),
                                   float(t_start), np.uint64(self._fingerprint()), s.zeno_max_events)
         # the state's arrays are views on _memory, so that a step's backup and rollback are one copy each
-        self.state, self._scratch, self._memory, self._backup, self._now = ses.views(self._session)
+        self.state, self._memory, self._backup = ses.views(self._session)
         self._snapshot: catalogue.Snapshot | None = None  # made by the first snapshot()
+
+    @functools.cached_property
+    def _outputs(self) -> tuple[st.Recorder, tuple]:
+        """(scratch recorder, now): where step and advance record and what snapshot shows (session.outputs), fetched
+        on a face's first call: a run reads neither."""
+        return ses.outputs(self._session)
 
     # --- state -----------------------------------------------------------------------------------
     def _fingerprint(self) -> int:
@@ -174,7 +181,7 @@ class Solver:
         snap = self._snapshot
         if snap is None:
             m, lay, y = self.model, self.layout, self.state.physical.y
-            observation, accel, in_contact = self._now
+            observation, accel, in_contact = self._outputs[1]
             snap = self._snapshot = catalogue.Snapshot(
                 self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel, y[None, lay.base],
                 angular_velocity(lay, y[None]), orientation(lay, y[None]), np.zeros((1, len(LEDGER_TERMS))),
@@ -203,7 +210,7 @@ class Solver:
         status = ses.resume(self._session, math.inf, 1)[0]
         if status not in (DONE, MAX_STEPS):
             self._fail(status)
-        self._closed_into(self._scratch)
+        self._closed_into(self._outputs[0])
         return self.t
 
     def dense_output(self) -> Callable[[np.ndarray | float], np.ndarray]:
@@ -261,7 +268,7 @@ class Solver:
             self._check_input(a, omega)
             raise SolverError(f"base_accel, angular_velocity: {a}, {omega} refused")  # _check_input said why
         while n_impacts:
-            self._closed_into(self._scratch)
+            self._closed_into(self._outputs[0])
             if status != IMPACTS_FULL:
                 break
             status, t_target, n_impacts = ses.resume(self._session, t_target, self.max_steps)
@@ -309,16 +316,10 @@ class Solver:
         t_end = s.t_end if t_end is None else float(t_end)
         dt_out = s.output_interval if output_interval is None else float(output_interval)
         self._save()
-        npair = len(self.model.pairs)
-        n_expected = int(math.floor((t_end - self.t) / dt_out + 1e-9)) + 1
-        rec = st.recorder(n_expected + 1, self.layout.size, npair, max(npair, 1) * 256)
-        cur = rec.cursor
-        cur["grid_t0"], cur["grid_dt"], cur["grid_k"], cur["n_out"] = self.t, dt_out, 1, 1
-        rec.t[0], rec.y[0] = self.t, self.state.physical.y
-        rec.accel[0], rec.totals[0] = self.base_accel, self.state.book.totals[0]
-        start = self.state.physical.contacts.copy()
-        rec.logged[:] = start
         t_start = self.t
+        rec = ses.recording(self._session, int(math.floor((t_end - t_start) / dt_out + 1e-9)) + 2, dt_out)
+        cur = rec.cursor
+        start = rec.logged.copy()
         chunks, changes, impacts = [], [], []  # what a full recorder handed over (rare: it is sized for the whole run)
         offset = 0  # samples handed over
         wall = time.perf_counter()
