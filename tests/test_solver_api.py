@@ -139,12 +139,16 @@ def same_state(a, b) -> bool:
     return fa.keys() == fb.keys() and all(np.array_equal(fa[k], fb[k]) for k in fa)
 
 
-def cluster_state():
+def _cluster_solver_args():
     from pathlib import Path
 
     from grapefmu.cluster import ClusterSpec, cluster_scene
     from grapefmu.scenefile import scene_from_dict
-    return Solver(scene_from_dict(cluster_scene(ClusterSpec(berries=12, seed=3)), Path.cwd())).get_state()
+    return (scene_from_dict(cluster_scene(ClusterSpec(berries=12, seed=3)), Path.cwd()),)
+
+
+def cluster_state():
+    return Solver(*_cluster_solver_args()).get_state()
 
 
 def corrupted(state, name, how):
@@ -225,6 +229,23 @@ def test_each_float_field_is_checked_by_its_own_rule(collision_scene, name, fiel
     else:
         s.set_state(unflatten(arrays))
         assert same_state(unflatten(arrays), s.state)
+
+
+def test_a_state_with_many_pairs_round_trips_and_names_a_bad_pair_field():
+    """Records of several rows (a 12-berry cluster's pairs): their floats are gathered row by row (a fancy index of
+    the bytes that numpy laid out by columns once made set_state raise ValueError for any scene of two pairs or
+    more, and the FMU's build refused its own state)."""
+    from grapefmu.solver.state import unflatten
+    state = cluster_state()
+    s = Solver(*_cluster_solver_args())
+    assert state.physical.contacts.shape[0] > 2
+    s.set_state(state)
+    assert same_state(state, s.state)
+    arrays = {k: v.copy() for k, v in flatten(state).items()}
+    arrays["book.pair"]["dissipated"][-1] = np.nan
+    with pytest.raises(StateError, match=re.escape("state book.pair.dissipated: ")):
+        s.set_state(unflatten(arrays))
+    assert same_state(state, s.state)
 
 
 def test_a_state_from_another_scene_is_refused(collision_scene):

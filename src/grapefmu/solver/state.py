@@ -283,7 +283,7 @@ def _floats(a: np.ndarray, columns: np.ndarray) -> np.ndarray:
     if not a.dtype.names:
         return a
     rows = np.ascontiguousarray(a).reshape(-1).view(np.uint8).reshape(a.size, a.dtype.itemsize)
-    return rows[:, columns].view(np.float64)
+    return np.ascontiguousarray(rows[:, columns]).view(np.float64)  # numpy may lay a fancy index out by columns
 
 
 def check(state, template: SolverState, n_breaks: int) -> None:
