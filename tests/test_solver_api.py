@@ -139,16 +139,16 @@ def same_state(a, b) -> bool:
     return fa.keys() == fb.keys() and all(np.array_equal(fa[k], fb[k]) for k in fa)
 
 
-def _cluster_solver_args():
+def twelve_berries():
     from pathlib import Path
 
     from grapefmu.cluster import ClusterSpec, cluster_scene
     from grapefmu.scenefile import scene_from_dict
-    return (scene_from_dict(cluster_scene(ClusterSpec(berries=12, seed=3)), Path.cwd()),)
+    return scene_from_dict(cluster_scene(ClusterSpec(berries=12, seed=3)), Path.cwd())
 
 
 def cluster_state():
-    return Solver(*_cluster_solver_args()).get_state()
+    return Solver(twelve_berries()).get_state()
 
 
 def corrupted(state, name, how):
@@ -237,7 +237,7 @@ def test_a_state_with_many_pairs_round_trips_and_names_a_bad_pair_field():
     more, and the FMU's build refused its own state)."""
     from grapefmu.solver.state import unflatten
     state = cluster_state()
-    s = Solver(*_cluster_solver_args())
+    s = Solver(twelve_berries())
     assert state.physical.contacts.shape[0] > 2
     s.set_state(state)
     assert same_state(state, s.state)
