@@ -90,8 +90,7 @@ def start(model, excitation, tableau, config, y, t, fingerprint, zeno_max):
         C[p].v_onset = HC_MIN_APPROACH_SPEED
         if config[0].step_control and model.pair[p].law != _KELVIN_VOIGT:
             S.book.pair[p].smooth_until = np.inf  # no force jump at onset
-    for p in range(npair):
-        mode, ddot = classify(p, y, model, C, W.berry, 0)
+        mode, ddot = classify(p, y, model, C, W.berry, 0)  # pair p's own records and y alone
         C[p].mode = mode
         if mode != 0:
             open_impact(S.book.pair[p], S.book.totals[0], t, ddot)

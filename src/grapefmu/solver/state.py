@@ -315,7 +315,7 @@ def check(state, template: SolverState, n_breaks: int) -> None:
         v = _floats(a, columns)
         if np.isfinite(v).all():
             continue
-        bad = np.isnan(v) | (np.isinf(v) & (finite if a.dtype.names else finite[0]))
+        bad = np.isnan(v) | (np.isinf(v) & finite)  # a plain array's one flag broadcasts
         if bad.any():
             k = int(np.argwhere(bad)[0][-1]) if a.dtype.names else 0
             raise StateError(f"state {name}{fields[k]}: {v[bad].flat[0]!r} is not a finite number")
