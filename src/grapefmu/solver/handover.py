@@ -111,6 +111,7 @@ def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid
     clk.break_index = 0
     clk.t_prev = t
     clk.h_last = 0.0
+    clk.err_last = 0.0  # the island's step-size control starts afresh
     restart(S, M, s.excitation, s.config[0].skin)
     R = s.scratch
     cur = R.cursor[0]

@@ -136,7 +136,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
     npair = C.shape[0]
     ny = P.y.shape[0]
     ns = TB.b.shape[0]
-    err_exp = -1.0 / (TB.error_order + 1.0)
+    err_exp = -(1.0 / (TB.error_order + 1.0) - 0.75 * TB.beta)  # Hairer's exponent with his PI gain β
     fixed = cfg.fixed_step > 0.0
     W, samples = Z.W, Z.samples
     tmp, acc, ynew, err, scale, work = Z.tmp, Z.acc, Z.ynew, Z.err, Z.scale, Z.work
@@ -259,7 +259,9 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         else:
             I.f[:] = I.stages[ns]
         if not fixed:
-            fac = 10.0 if en == 0.0 else min(10.0, max(0.2, 0.9 * en ** err_exp))
+            # PI control (docs/solver.md, "Step-size control"): the last accepted step's error damps the growth
+            fac = 10.0 if en == 0.0 else min(10.0, max(0.2, 0.9 * en ** err_exp * max(clk.err_last, 1e-4) ** TB.beta))
+            clk.err_last = en
             clk.h = h_prop if (clipped or event) and fac * h < h_prop else h * fac
             # A contact that opens stiffens the system at once, and the step size from before it was often rejected:
             # the next onset starts no longer than the last contact's first step proposed (docs/solver.md).

@@ -28,9 +28,10 @@ CONFIG = np.dtype([("rtol", "f8"), ("atol", "f8"), ("fixed_step", "f8"), ("zeno_
                    ("h_max", "f8"), ("skin", "f8"), ("step_control", "?"), ("bruise_force", "f8"),
                    ("bruise_energy", "f8"), ("detachment_force", "f8")])
 #: integrator scalars; h_contact: the step size error control proposed after the first step of the last contact
-#: to open (0 before one has), where the next onset starts (after_onset: the next accepted step sets it)
+#: to open (0 before one has), where the next onset starts (after_onset: the next accepted step sets it); err_last: the
+#: last accepted step's error norm, which step-size control's PI term reads (0 before the first)
 CLOCK = np.dtype([("h", "f8"), ("t_prev", "f8"), ("h_last", "f8"), ("break_index", "i8"), ("h_contact", "f8"),
-                  ("after_onset", "?")])
+                  ("err_last", "f8"), ("after_onset", "?")])
 #: how much work the solver did
 BOOK_COUNTERS = np.dtype([("steps", "i8"), ("rejected", "i8"), ("rhs_evaluations", "i8"), ("switches", "i8"),
                           ("zeno_activations", "i8"), ("near_pairs_sum", "i8"), ("near_list_rebuilds", "i8"),

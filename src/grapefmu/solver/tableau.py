@@ -24,6 +24,7 @@ class Tableau(NamedTuple):
     e3: np.ndarray      # (s + 1,) DOP853's third-order estimate, which tempers the fifth's (empty otherwise)
     a_extra: np.ndarray  # (m, S) the m stages only the dense output needs, after the FSAL stage ((0, 0) if none)
     c_extra: np.ndarray  # (m,)
+    beta: float = 0.0   # step-size control's gain on the last accepted step's error (PI control; 0: plain I control)
 
 
 NO_E3, NO_A_EXTRA, NO_C_EXTRA = np.zeros(0), np.zeros((0, 0)), np.zeros(0)
@@ -50,6 +51,7 @@ DOPRI5 = Tableau(
     order=5,
     error_order=4,
     e3=NO_E3, a_extra=NO_A_EXTRA, c_extra=NO_C_EXTRA,
+    beta=0.04,  # Hairer's dopri5 (his dop853 keeps 0): docs/solver.md, "Step-size control"
 )
 
 BOGACKI_SHAMPINE = Tableau(
