@@ -54,7 +54,7 @@ PROBES = [
     ("opened = Bk.totals[0].collision_count", "(empty: a probe's own cost)"),
     ("# a whole step's end was sampled", "switch_modes"),
     ("if changed or event or (bi < nbreak", "early rebuild"),
-    ("if not fixed:\n            fac = 10.0", "derivative after a switch, or the FSAL copy"),
+    ("if not fixed:\n            # PI control", "derivative after a switch, or the FSAL copy"),
 ]
 
 
