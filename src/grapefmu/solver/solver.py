@@ -44,10 +44,7 @@ SKIN_FRACTION = 0.5
 #: the pre-compressed shaken pair), but its error there is up to 8 times DOPRI5's (free swing: 1.6e-6 against
 #: 2.0e-7 rad), far from the tolerance asked: the crossover stays. (Before the δ-slope graze test,
 #: events.graze_possible, DOP853's longer steps also missed the grazing scene's graze at 1e-6 and 1e-7.)
-#: Again on 2026-11-28, with a step's fixed cost lower: at 1e-6 rad DOP853 costs 0.82..0.87 of DOPRI5 on six of
-#: the seven scenes (1.07 on the pre-compressed shaken pair), but a pick-and-place cluster at rtol 1e-6 takes
-#: 1.1 (20 berries) to 1.9 times (100 and 300, in islands) as long with it: where onsets or island windows cut
-#: the steps, DOP853's twice as many stages a step buy nothing (docs/bench_notes.md, "Stop 40").
+#: Measured again on 2026-11-28, clusters as well: docs/solver.md, "Order to match the tolerance".
 DOP853_BELOW = 1e-7
 
 NO_IMPACTS = Impacts.from_records(np.zeros(0, dtype=st.IMPACT))
