@@ -2,15 +2,18 @@
 control (beta = 0) on the seven benchmark scenes: accepted steps, rejected trials, right-hand sides and the largest
 angle error against the scene at rtol 1e-13 (1 ms grid); then, for the paper collision under each, where the
 rejected trials fall (on steps that start with the pair apart or in contact), one `Solver.step` at a time.
-Counts, not times: the same on every host.
-Run: .venv/bin/python benchmarks/step_control.py [rtol ...]   (default 1e-4 1e-6)"""
+Counts, not times: the same on every host. --clusters N ...: the Scale section's pick-and-place cluster of N berries
+at its rtol 1e-6 as `simulate` runs it, wall time under each controller, interleaved, the minimum of 3.
+Run: .venv/bin/python benchmarks/step_control.py [rtol ...] [--clusters 10 30 100 300]   (default rtol 1e-4 1e-6)"""
 from __future__ import annotations
 
-import sys
+import argparse
+import time
 
 import numpy as np
 
 import grapefmu
+from grapefmu.bench.scale import scene as scale_scene
 from grapefmu.bench.scenes import bench_scenes, build
 from grapefmu.solver import solver as solver_module
 from grapefmu.solver.solver import Solver
@@ -32,7 +35,23 @@ def where_rejected(sc, rtol: float) -> tuple[int, int]:
     return apart, touching
 
 
-def main(rtols: list[float]) -> None:
+def clusters(sizes: list[int]) -> None:
+    """Wall time of the Scale section's cluster under each controller, interleaved, the minimum of 3 after a warm-up."""
+    for n in sizes:
+        sc = scale_scene("cluster", n)
+        best = dict.fromkeys(BETAS, np.inf)
+        for rep in range(4):
+            for beta in BETAS:
+                solver_module.DOPRI5 = DOPRI5._replace(beta=beta)
+                t = time.perf_counter()
+                grapefmu.simulate(sc)
+                if rep:
+                    best[beta] = min(best[beta], time.perf_counter() - t)
+        print(f"cluster of {n}: {1e3 * best[BETAS[0]]:.1f} ms (β {BETAS[0]:g}) against {1e3 * best[0.0]:.1f} ms (β 0) "
+              f"per simulated second: {best[BETAS[0]] / best[0.0]:.3f}")
+
+
+def main(rtols: list[float], sizes: list[int]) -> None:
     print("| scene | rtol | β | steps | rejected | RHS | error (rad) |\n|---|---|---|---|---|---|---|")
     try:
         for name, spec in bench_scenes().items():
@@ -52,9 +71,14 @@ def main(rtols: list[float]) -> None:
                 apart, touching = where_rejected(sc, rtol)
                 print(f"paper collision, rtol {rtol:g}, β {beta:g}: {apart} rejected trials on steps that start with "
                       f"the pair apart, {touching} in contact")
+        clusters(sizes)
     finally:
         solver_module.DOPRI5 = DOPRI5
 
 
 if __name__ == "__main__":
-    main([float(a) for a in sys.argv[1:]] or [1e-4, 1e-6])
+    p = argparse.ArgumentParser()
+    p.add_argument("rtol", type=float, nargs="*", default=[1e-4, 1e-6])
+    p.add_argument("--clusters", type=int, nargs="*", default=[])
+    a = p.parse_args()
+    main(a.rtol, a.clusters)
