@@ -5,9 +5,11 @@ error = max |angles − reference| over the run, the reference being the same sc
 (DOP853, atol 1e-15); cost = the fastest of REPEATS wall times, the runs of both pairs interleaved. Printed
 per scene: the cost at 1e-6 and 1e-10 rad (log-log interpolation between rtols), steps and RHS evaluations,
 and per rtol the ratio of DOP853's cost to DOPRI5's at the error DOP853 reached (< 1: DOP853 pays).
-solver.DOP853_BELOW is set from these ratios.
+solver.DOP853_BELOW is set from these ratios. `clusters N ...` instead: the Scale section's pick-and-place cluster
+of N berries at rtol 1e-6 under each pair as `simulate` runs it (islands from 100 berries), wall time (the fastest of
+3, interleaved) and error against the scene at rtol 1e-10 (bench/scale.error).
 
-    PYTHONPATH=src python benchmarks/order_crossover.py [scene ...]
+    PYTHONPATH=src python benchmarks/order_crossover.py [scene ... | clusters N ...]
 """
 from __future__ import annotations
 
@@ -43,6 +45,26 @@ def at_error(errors, costs, target):
             w = (math.log10(target) - le[i]) / (le[i + 1] - le[i])
             return 10.0 ** (lc[i] + w * (lc[i + 1] - lc[i]))
     return math.nan
+
+
+def clusters(sizes, rtol=1e-6):
+    from grapefmu.bench.scale import error, scene
+    kept = sv.DOP853_BELOW
+    try:
+        for n in sizes:
+            sc, best, err = scene("cluster", n, rtol), {}, {}
+            for rep in range(4):
+                for p in PAIRS:
+                    w, _ = run(sc, p, rtol, rtol * 1e-3)  # the Scale section's atol
+                    if rep:
+                        best[p] = min(best.get(p, math.inf), w)
+            for p in PAIRS:
+                sv.DOP853_BELOW = PAIRS[p]
+                err[p] = error("cluster", n, rtol)
+            print(f"cluster of {n}, rtol {rtol:g}: " + ", ".join(
+                f"{p} {1e3 * best[p]:.1f} ms per simulated s, error {err[p]:.1e} rad" for p in PAIRS))
+    finally:
+        sv.DOP853_BELOW = kept
 
 
 def main(names):
@@ -83,4 +105,7 @@ def main(names):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:] or SCENES)
+    if sys.argv[1:2] == ["clusters"]:
+        clusters([int(n) for n in sys.argv[2:]])
+    else:
+        main(sys.argv[1:] or SCENES)
