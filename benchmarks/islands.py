@@ -50,7 +50,7 @@ def sections(sc, repeats: int) -> None:
     wrapped += [(isl._Batch, m, f"_Batch.{m}") for m in ("__init__", "replace")]
     wrapped += [(ses, m, f"session.{m}") for m in ("windows", "previews", "island", "take_impacts", "rollback", "grow",
                                                    "put", "labels", "take_last", "listed")]
-    wrapped += [(isl, m, f"{m} (compiled)") for m in ("retire", "form", "parts", "slack", "components")]
+    wrapped += [(isl, m, f"{m} (compiled)") for m in ("retire", "flush_all", "form", "parts", "slack", "components")]
     saved = [(obj, name, getattr(obj, name)) for obj, name, _ in wrapped]
 
     def timer(f, label):

@@ -17,6 +17,7 @@ from grapefmu.scenefile import load_scene, scene_from_dict
 from grapefmu.physics.kinematics import positions
 from grapefmu.solver.api import simulate
 from grapefmu.solver.components import groups, sub_scene
+from grapefmu.solver import session as ses
 from grapefmu.solver.islands import Islands
 from grapefmu.solver.solver import Solver
 
@@ -80,7 +81,8 @@ def test_islands_that_could_have_met_run_again_as_one():
     """With windows too long for the first grouping, islands whose berries' travel bounds overlap are rolled back
     and rerun together (solver/islands.py): the run still has every impact of one Solver of the whole scene at the
     same time, the same samples to the tolerance, the same counts sample by sample and peaks, and a closed energy
-    ledger."""
+    ledger. Each window's samples go into the run's arrays at the next window's start, after the rollbacks, so an
+    island's recorder never holds more than a window (its memory does not grow with the run)."""
     sc = cluster(30, t_end=1.0, rtol=1e-9)
     whole = simulate(sc)
     isl = Islands(sc, window=0.1)
@@ -99,6 +101,7 @@ def test_islands_that_could_have_met_run_again_as_one():
     np.testing.assert_array_equal(run.contact_log.mode(len(run.t)), whole.contact_log.mode(len(whole.t)))
     assert run.ledger_error() < 1e-7
     assert run.stats["steps"] > 0 and run.stats["impacts"] == whole.stats["impacts"]
+    assert {ses.outputs(s.session)[0].t.shape[0] for pool in isl.free.values() for s in pool} == {isl.per + 1}
 
 
 def test_pruning_never_drops_a_pair_that_touches():

@@ -127,7 +127,7 @@ def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid
 def scene_rows(M, members, dofs, couplings, scene_offsets, rows):
     """rows[r]: the scene's component of island component r, for every component before the energy ledger (angles,
     rates, the rachis motion, the hinges' and couplings' dissipation). The one map between the two layouts: form,
-    scatter and retire copy through it."""
+    scatter and flush copy through it."""
     s_bv, s_dh, s_dc, d, _, _ = scene_offsets
     o_bv, _, _, _, o_dh, o_dc, _, _, _ = model_offsets(M)
     nd = M.n_dof
@@ -163,33 +163,59 @@ def scatter(s, G):
 
 
 @jit
-def retire(s, G, scene_offsets, k0, y, accel, totals, later, ledger_later, counters):
-    """Island session s's state back into the scene's G (scatter), and what its recorder holds into the run's
-    arrays from sample k0 on: y (the scene's layout) and accel, and totals, to which it adds its counts and
-    energy integrals and where it raises the peaks. What it closed with holds for every later sample: its totals
-    go into `later` and its energy integrals (contacts, work) into `ledger_later`, at the sample after its last
-    (the run sums and raises them over the samples after, Islands._assemble). Its work counters are added to
-    `counters` ((1,) BOOK_COUNTERS). Returns its contact changes (a copy) and its steps."""
+def flush(s, scene_offsets, y, accel, totals):
+    """The samples island session s recorded since its last flush into the run's arrays at their rows of the output
+    grid: y (the scene's layout; the energy ledger's terms added, each island's own), accel, and totals, to which it
+    adds its counts and where it raises the peaks. Its recorder is empty again, its grid position kept.
+    Why at every window's start (flush_all) and not only when the island retires: its recorder then holds one window,
+    so an islands run's memory grows with the run's own arrays alone (a recorder with room for the rest of the run
+    took 2.4 times as much over 4 s at N = 300; docs/solver.md, "Multirate islands"). A window is flushed once it is
+    final: a rollback (session.rollback) returns to its start, where the recorder was empty."""
+    M, R, rows = s.model, s.scratch, s.buffers.rows
+    s_contact, s_work = scene_offsets[4:6]
+    o_contact, o_work = model_offsets(M)[6:8]
+    cur = R.cursor[0]
+    r = cur.n_out
+    k0 = cur.grid_k - r  # the run's sample of the recorder's first row
+    Ry, Ra, Rt = R.y, R.accel, R.totals
+    for k in range(r):  # element by element: a row view or slice costs reference counts per sample
+        row = k0 + k
+        for a in range(o_contact):
+            y[row, rows[a]] = Ry[k, a]
+        y[row, s_contact] += Ry[k, o_contact]
+        y[row, s_work] += Ry[k, o_work]
+        for c in range(6):
+            accel[row, c] = Ra[k, c]
+        _add(totals[row], Rt[k])
+    cur.n_out = 0
+
+
+@jit
+def flush_all(sessions, scene_offsets, y, accel, totals):
+    """`flush` of every island in the list (a window's start)."""
+    for k in range(len(sessions)):
+        flush(sessions[k], scene_offsets, y, accel, totals)
+
+
+@jit
+def retire(s, G, scene_offsets, y, accel, totals, later, ledger_later, counters):
+    """Island session s's state back into the scene's G (scatter) and its last samples into the run's arrays
+    (flush). What it closed with holds for every later sample: its totals go into `later` and its energy integrals
+    (contacts, work) into `ledger_later`, at the sample after its last (the run sums and raises them over the samples
+    after, Islands._assemble). Its work counters are added to `counters` ((1,) BOOK_COUNTERS). Returns its contact
+    changes (a copy; each at its sample of the run's grid) and its steps."""
+    flush(s, scene_offsets, y, accel, totals)
     scatter(s, G)
     done, c = s.state.book.counters[0], counters[0]
     for f in literal_unroll(WORK):
         c[f] += done[f]
-    S, M, R, rows = s.state, s.model, s.scratch, s.buffers.rows
-    s_contact, s_work = scene_offsets[4:6]
+    S, M, R = s.state, s.model, s.scratch
     o_contact, o_work = model_offsets(M)[6:8]
-    r = R.cursor[0].n_out
-    for k in range(r):
-        row, Y = k0 + k, R.y[k]
-        for a in range(o_contact):
-            y[row, rows[a]] = Y[a]
-        y[row, s_contact] += Y[o_contact]
-        y[row, s_work] += Y[o_work]
-        accel[row, :] = R.accel[k, :]
-        _add(totals[row], R.totals[k])
-    _add(later[k0 + r], S.book.totals[0])
+    after = R.cursor[0].grid_k
+    _add(later[after], S.book.totals[0])
     Y = S.physical.y
-    ledger_later[k0 + r, 0] += Y[o_contact]
-    ledger_later[k0 + r, 1] += Y[o_work]
+    ledger_later[after, 0] += Y[o_contact]
+    ledger_later[after, 1] += Y[o_work]
     return R.changes[:R.cursor[0].n_changes].copy(), done.steps
 
 

@@ -32,7 +32,7 @@ from . import session as ses
 from . import state as st
 from .loop import IMPACTS_FULL, OUT_FULL
 from .drift import components, slack
-from .handover import form, parts, retire
+from .handover import flush_all, form, parts, retire
 from .solver import STATUS_TEXT, Solver, open_impacts, run_stats
 
 #: the default window, s: long enough that a window's calls cost little against its steps, short enough that
@@ -44,9 +44,6 @@ K = 5
 #: of the last window) is below JOIN; berries of one island part where it is above STAY
 JOIN = 5e-4
 STAY = 5e-3
-#: samples an island's recorder holds at first: the rest of the run up to this many (rows not written are never
-#: touched, so room costs address space only; growing a recorder costs a new session)
-ROWS = 4096
 
 
 class _System:
@@ -64,15 +61,15 @@ class _System:
 
 class _Segment:
     """One island over the windows it lived through: its berries and pairs (scene indices, as Python reads them;
-    its compiled side holds them too, with its map of the scene's components, handover.form), its system, from
-    output sample k0 on, and what it recorded that the run assembles last (its impacts and contact changes; its
-    samples go into the run's arrays when it retires)."""
+    its compiled side holds them too, with its map of the scene's components, handover.form), its system, and what it
+    recorded that the run assembles last (its impacts and contact changes; its samples go into the run's arrays at
+    each window's start and when it retires, handover.flush)."""
 
-    __slots__ = ("members", "pairs", "system", "k0", "impacts", "window", "changes")
+    __slots__ = ("members", "pairs", "system", "impacts", "window", "changes")
 
-    def __init__(self, members, pairs, system, k0):
+    def __init__(self, members, pairs, system):
         self.members, self.pairs = members, pairs
-        self.system, self.k0 = system, k0
+        self.system = system
         self.impacts: list[np.ndarray] = []   # finished impacts of the windows kept
         self.window: list[np.ndarray] = []    # ... of the window in progress
         self.changes = None                   # when it retired: its contact changes
@@ -178,8 +175,8 @@ class Islands:
         """Put a segment's state into the scene's and its samples into the run's arrays, keep its contact changes
         and free its system."""
         system = seg.system
-        seg.changes, steps = retire(system.session, self.G, self.scene_offsets, seg.k0, self.y, self.accel,
-                                    self.totals, self.later, self.ledger_later, self.counters)
+        seg.changes, steps = retire(system.session, self.G, self.scene_offsets, self.y, self.accel, self.totals,
+                                    self.later, self.ledger_later, self.counters)
         self.berry_steps += len(seg.members) * steps
         seg.impacts += seg.window
         seg.window = []
@@ -191,13 +188,14 @@ class Islands:
         pairs, couplings, dofs = parts(members, self.inside, self.pair_owner, self.pair_other, self.coupled, self.dof)
         shape = (len(members), len(dofs), len(couplings), len(pairs))
         pool = self.free.get(shape)
-        rows = min(self.n_samples - k0 + 1, ROWS)
-        system = pool.pop() if pool else _System(self.whole, *shape, rows)
+        # a recorder holds one window's samples (flushed at the next window's start): a few kilobytes that the
+        # allocator hands back, where room for the rest of the run was fresh pages, faulted in for every system
+        system = pool.pop() if pool else _System(self.whole, *shape, self.per + 1)
         w = self.whole
         form(system.session, w.M, self.G, members, dofs, pairs, couplings, self.local, self.scene_offsets, t, self.t0,
              self.dt, k0)
         self.formed += 1
-        return _Segment(members, pairs, system, k0)
+        return _Segment(members, pairs, system)
 
     # --- windows ----------------------------------------------------------------------------------------------
     def _run(self, batch: _Batch, t_w: float) -> None:
@@ -273,6 +271,7 @@ class Islands:
             seg.window = []
         self.pending.clear()
         b = self.batch
+        flush_all(b.sessions, self.scene_offsets, self.y, self.accel, self.totals)  # the last window is final
         self._run(b, t_w)
         while True:
             label = b.label
@@ -347,7 +346,6 @@ class Islands:
         finished, changes = [], []
         for seg in self.segments:
             ch = seg.changes
-            ch["sample"] += seg.k0
             ch["pair"] = seg.pairs[ch["pair"]]
             changes.append(ch)
             for rec in seg.impacts:

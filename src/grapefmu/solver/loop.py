@@ -75,7 +75,8 @@ def differs(c, d):
 @jit
 def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
     """Samples on the output grid in (t0, t_commit], and each pair whose contact record the samples hold differs
-    from the one logged before (results/contacts.py). Returns False when the recorder is full."""
+    from the one logged before (results/contacts.py), at the first new sample's index on the grid (grid_k: the run's
+    sample, whatever the recorder handed over before). Returns False when the recorder is full."""
     cur = R.cursor[0]
     dt_out = cur.grid_dt
     kg = cur.grid_k
@@ -98,7 +99,7 @@ def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
             c, d = contacts[p], logged[p]
             if differs(c, d):
                 row = R.changes[n]
-                row.sample, row.pair, row.mode, row.v_onset, row.smooth = o, p, c.mode, c.v_onset, c.smooth
+                row.sample, row.pair, row.mode, row.v_onset, row.smooth = kg, p, c.mode, c.v_onset, c.smooth
                 d.mode, d.v_onset, d.smooth = c.mode, c.v_onset, c.smooth
                 n += 1
         cur.n_changes = n
@@ -260,7 +261,12 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
             I.f[:] = I.stages[ns]
         if not fixed:
             # PI control (docs/solver.md, "Step-size control"): the last accepted step's error damps the growth
-            fac = 10.0 if en == 0.0 else min(10.0, max(0.2, 0.9 * en ** err_exp * max(clk.err_last, 1e-4) ** TB.beta))
+            if en == 0.0:
+                fac = 10.0
+            elif TB.beta > 0.0:
+                fac = min(10.0, max(0.2, 0.9 * en ** err_exp * max(clk.err_last, 1e-4) ** TB.beta))
+            else:  # plain I control (DOP853, ode23): the same factor without the power of 1
+                fac = min(10.0, max(0.2, 0.9 * en ** err_exp))
             clk.err_last = en
             clk.h = h_prop if (clipped or event) and fac * h < h_prop else h * fac
             # A contact that opens stiffens the system at once, and the step size from before it was often rejected:

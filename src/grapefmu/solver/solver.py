@@ -322,7 +322,6 @@ class Solver:
         cur = rec.cursor
         start = rec.logged.copy()
         chunks, changes, impacts = [], [], []  # what a full recorder handed over (rare: it is sized for the whole run)
-        offset = 0  # samples handed over
         wall = time.perf_counter()
         chunk, steps = 5000, 0
         while True:
@@ -334,8 +333,7 @@ class Solver:
             if status == OUT_FULL:
                 n = int(cur["n_out"][0])
                 chunks.append(tuple(a[:n].copy() for a in rec[:st.SAMPLED]))
-                changes.append(self._changes(rec, offset))
-                offset += n
+                changes.append(self._changes(rec))
                 cur["n_out"], cur["n_changes"] = 0, 0
                 continue
             if status == MAX_STEPS:
@@ -351,7 +349,7 @@ class Solver:
         if progress:
             progress(self.t, t_end)
         chunks.append(tuple(a[: int(cur["n_out"][0])] for a in rec[:st.SAMPLED]))
-        changes.append(self._changes(rec, offset))
+        changes.append(self._changes(rec))
         impacts.append(rec.impacts[: int(cur["n_impacts"][0])])
         t, y, accel, totals = (concat([c[i] for c in chunks]) for i in range(st.SAMPLED))
         stats = self.stats | {"wall_time": wall, "method": self.method, "t_start": t_start, "rtol": self.rtol,
@@ -362,12 +360,9 @@ class Solver:
                    self.state.book.pair["peak_force"].copy(), self.state.book.peak_tension.copy(), stats)
 
     @staticmethod
-    def _changes(rec: st.Recorder, offset: int) -> np.ndarray:
-        """The contact changes a recorder holds, their sample indices counted from the run's first sample."""
-        out = rec.changes[: int(rec.cursor["n_changes"][0])].copy()
-        if offset:
-            out["sample"] += offset
-        return out
+    def _changes(rec: st.Recorder) -> np.ndarray:
+        """The contact changes a recorder holds (each at its sample of the run: loop.record_grid)."""
+        return rec.changes[: int(rec.cursor["n_changes"][0])].copy()
 
 
 def open_impacts(contacts: np.ndarray, book_pair: np.ndarray, t: float) -> np.ndarray:

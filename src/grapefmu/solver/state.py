@@ -106,7 +106,7 @@ class Recorder(NamedTuple):
     y: np.ndarray          # (cap, ny)
     accel: np.ndarray      # (cap, 6) ACCEL_COMPONENTS
     totals: np.ndarray     # (cap,) TOTALS
-    changes: np.ndarray    # (cap_changes,) results.contacts.CHANGE, the sample index within this recorder
+    changes: np.ndarray    # (cap_changes,) results.contacts.CHANGE, its sample on the output grid (cursor.grid_k)
     logged: np.ndarray     # (P,) CONTACT: each pair's record as the samples from its last change on hold it
     impacts: np.ndarray    # (cap_impacts,) IMPACT
     cursor: np.ndarray     # (1,) CURSOR
