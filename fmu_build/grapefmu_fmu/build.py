@@ -143,7 +143,7 @@ def build_fmu(scene_path: str | Path, out: str | Path, fmi: int = 2, outputs: st
                                       src / shim.PYTHON_FILE], tmp / "out", fmi)
         with zipfile.ZipFile(built) as z:
             entries = {n: z.read(n) for n in z.namelist()}
-        for f in _live_cache_files(bundle):  # pythonfmu leaves __pycache__ out
+        for f in _live_cache_files(bundle, _used_indexes()):  # pythonfmu leaves __pycache__ out
             entries[f"resources/bundle/{f.relative_to(bundle).as_posix()}"] = f.read_bytes()
         entries["modelDescription.xml"] = _description(entries["modelDescription.xml"], fmi, scene, outputs)
         _install_binary(entries, ident, fmi, tmp)
@@ -166,19 +166,46 @@ def requirements(fmi: int) -> str:
 def _warm_up(scene: Path) -> None:
     """Run the FMU's core once here, so that numba's cache (bundled with the sources) holds every function
     the FMU compiles: a host on a machine like this one then loads it instead of compiling."""
+    from grapefmu.physics.compiled import entry
+    from grapefmu.solver import session
+
     from .core import FmuCore
     core = FmuCore(scene)
     core.initialize()
     core.step(0.0, 1e-3)
     core.set_state(core.state_from_bytes(core.state_to_bytes(core.get_state())))
+    # what advance calls again when more impacts end within one step than its list holds (a long communication
+    # step of a busy scene): loaded now, so that it is bundled and a host never compiles mid-run
+    entry(session.resume, core.solver._session, 0.0, 1)
 
 
-def _live_cache_files(bundle: Path) -> list[Path]:
-    """The numba cache files of the bundle that its sources can use: each index whose source stamp (the
-    SHA-256 of the module's bytes, as numba 0.68 checks it, and physics/compiled.cache_stamp: the digest of the
-    core's sources and how references are counted) matches, and the data files it lists. A working checkout also
-    holds the entries of earlier versions of its functions, which would only make the FMU larger (and past the
-    cross-check's 10 MB)."""
+def _used_indexes() -> set[str]:
+    """The cache index of every compiled function this process has called from Python since it started (the build
+    runs in its own process, so: what the warm-up and loading the scene called), as a path from the packages'
+    parent. Its callees' code is in its own cache entry, so these are all an FMU host loads."""
+    from numba.core.dispatcher import Dispatcher
+
+    used = set()
+    for name, module in list(sys.modules.items()):
+        if name.split(".")[0] not in {pkg.name for pkg in PACKAGES}:
+            continue
+        for obj in vars(module).values():
+            cache_file = getattr(getattr(obj, "_cache", None), "_cache_file", None)
+            if isinstance(obj, Dispatcher) and obj.overloads and cache_file is not None:
+                root = Path(sys.modules[name.split(".")[0]].__file__).parent.parent
+                index = Path(cache_file._index_path)
+                if index.is_relative_to(root):  # else a NUMBA_CACHE_DIR elsewhere, which the bundle does not carry
+                    used.add(index.relative_to(root).as_posix())
+    return used
+
+
+def _live_cache_files(bundle: Path, used: set[str]) -> list[Path]:
+    """The numba cache files of the bundle that its sources can use and the FMU calls (`used`, from the bundle's
+    folder): each such index whose source stamp (the SHA-256 of the module's bytes, as numba 0.68 checks it, and
+    physics/compiled.cache_stamp: the digest of the core's sources and how references are counted) matches, and the
+    data files it lists. A working checkout also holds the entries of earlier versions of its functions, and of
+    functions only runs call (islands, benchmarks), which would only make the FMU larger: with them a build after
+    the test suite had compiled everything was 10.09 MB, past the cross-check's 10 MB."""
     import pickle
 
     import numba
@@ -188,6 +215,8 @@ def _live_cache_files(bundle: Path) -> list[Path]:
     core = cache_stamp(bundle / "grapefmu")
     out = []
     for index in sorted(bundle.rglob("__pycache__/*.nbi")):
+        if index.relative_to(bundle).as_posix() not in used:
+            continue
         source = index.parent.parent / f"{index.name.split('.', 1)[0]}.py"
         try:
             with open(index, "rb") as f:
