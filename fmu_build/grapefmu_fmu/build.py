@@ -182,12 +182,13 @@ def _warm_up(scene: Path) -> None:
 def _used_indexes() -> set[str]:
     """The cache index of every compiled function this process has called from Python since it started (the build
     runs in its own process, so: what the warm-up and loading the scene called), as a path from the packages'
-    parent. Its callees' code is in its own cache entry, so these are all an FMU host loads."""
+    parent. A callee's code is compiled into its caller's entry, so these are all an FMU host loads."""
     from numba.core.dispatcher import Dispatcher
 
+    ours = {pkg.name for pkg in PACKAGES}
     used = set()
     for name, module in list(sys.modules.items()):
-        if name.split(".")[0] not in {pkg.name for pkg in PACKAGES}:
+        if name.split(".")[0] not in ours:
             continue
         for obj in vars(module).values():
             cache_file = getattr(getattr(obj, "_cache", None), "_cache_file", None)
