@@ -105,45 +105,15 @@ def forces(acc, fr, contacts, M, W, pairs, n_pairs):
     Returns the total contact dissipation power and the base's power (§5): the frame's fields on the berries'
     motion relative to the rachis, and the obstacles fixed in the world on the berries as the rachis carries
     them past (§7: F n·(ḃ + ω × p) per berry–obstacle contact)."""
-    g = M.gravity
     berry, kin = M.berry, W.berry
-    if fr.turned == 0.0:  # R = I, ω = 0: the fields of a translating rachis (and α, which turns it from rest)
-        ex, ey, ez = -acc[0], -acc[1], -acc[2]
-        alx, aly, alz = acc[3], acc[4], acc[5]
-    else:
-        ax, ay, az = to_rachis(fr, acc[0], acc[1], acc[2])
-        gx, gy, gz = to_rachis(fr, 0.0, 0.0, -g)
-        ex, ey, ez = gx - ax, gy - ay, gz + g - az  # the field g⃗ − a, less the rachis-frame gravity (0, 0, −g)
-        alx, aly, alz = to_rachis(fr, acc[3], acc[4], acc[5])
-    ox, oy, oz = fr.ox, fr.oy, fr.oz
-    spinning = ox != 0.0 or oy != 0.0 or oz != 0.0 or alx != 0.0 or aly != 0.0 or alz != 0.0
+    fields = frame_fields(acc, fr, M.gravity)
     work = 0.0
     for i in range(berry.shape[0]):
-        m = berry[i].mass
-        k = kin[i]
-        fx, fy, fz = ex, ey, ez
-        if spinning:  # Euler −α × p, centrifugal −ω × (ω × p); Coriolis −2 ω × ṗ below (it does no work)
-            px, py, pz = k.px, k.py, k.pz
-            cx, cy, cz = oy * pz - oz * py, oz * px - ox * pz, ox * py - oy * px
-            fx -= aly * pz - alz * py + oy * cz - oz * cy
-            fy -= alz * px - alx * pz + oz * cx - ox * cz
-            fz -= alx * py - aly * px + ox * cy - oy * cx
-        work += m * (fx * k.vx + fy * k.vy + fz * k.vz)
-        k.fx = m * fx
-        k.fy = m * fy
-        k.fz = m * (fz - g)
-        if spinning:
-            k.fx -= 2.0 * m * (oy * k.vz - oz * k.vy)
-            k.fy -= 2.0 * m * (oz * k.vx - ox * k.vz)
-            k.fz -= 2.0 * m * (ox * k.vy - oy * k.vx)
+        work = field_force(berry[i].mass, kin[i], fields, fr, M.gravity, work)
     for k in range(M.coupling.shape[0]):
-        cp = M.coupling[k]
-        fc, _, sep_dot = coupling(cp, berry[cp.i], berry[cp.j], kin[cp.i], kin[cp.j])
-        kin[cp.i].fx += fc
-        kin[cp.j].fx -= fc
-        W.coupling_power[k] = cp.damping * sep_dot * sep_dot
+        sep_dot = coupling_push(M.coupling[k], berry, kin)
+        W.coupling_power[k] = M.coupling[k].damping * sep_dot * sep_dot
     diss = 0.0
-    nb = berry.shape[0]
     for kk in range(n_pairs):
         p = pairs[kk]
         c = contacts[p]
@@ -152,28 +122,104 @@ def forces(acc, fr, contacts, M, W, pairs, n_pairs):
             out.force = 0.0
             out.power = 0.0
             continue
-        pr = M.pair[p]
-        delta, delta_dot, nx, ny, nz = contact_gap(M, pr, kin)
-        f, power = pair_force(pr, c, delta, delta_dot)
+        f, power, work = contact_push(M, M.pair[p], c, kin, fr, work)
         out.force = f
         out.power = power
         diss += power
-        if f != 0.0:
-            ki = kin[pr.i]  # −F n on i, +F n on j (an obstacle takes it)
-            if fixed_in_world(M, pr):  # the normal of an obstacle fixed in the world is in the world frame
-                # F n·(ẋ − R ṗ): the obstacle's push on the berry as the rachis carries it, ḃ + R (ω × p)
-                work += f * (nx * ki.wvx + ny * ki.wvy + nz * ki.wvz)
-                nx, ny, nz = to_rachis(fr, nx, ny, nz)
-                work -= f * (nx * ki.vx + ny * ki.vy + nz * ki.vz)
-            ki.fx -= f * nx
-            ki.fy -= f * ny
-            ki.fz -= f * nz
-            if pr.j < nb:
-                kj = kin[pr.j]
-                kj.fx += f * nx
-                kj.fy += f * ny
-                kj.fz += f * nz
     return diss, work
+
+
+@inline
+def berry_force(i, acc, fr, contacts, M, kin, pairs, n_pairs):
+    """F_i of berry i alone into kin[i], as forces() computes it (the same terms in the same order, so the same
+    number): needs stage 1 of berry i and of the berries that push it (its couplings, its pairs in contact among
+    the first n_pairs of `pairs`). Their F gets its share too, which is not theirs whole: read kin[i] alone. A
+    berry's peak tension is refined on it (solver/sampling.py), where forces() would cost every berry."""
+    fields = frame_fields(acc, fr, M.gravity)
+    field_force(M.berry[i].mass, kin[i], fields, fr, M.gravity, 0.0)
+    for k in range(M.coupling.shape[0]):
+        cp = M.coupling[k]
+        if cp.i == i or cp.j == i:
+            coupling_push(cp, M.berry, kin)
+    for kk in range(n_pairs):
+        p = pairs[kk]
+        pr = M.pair[p]
+        if (pr.i == i or pr.j == i) and active(contacts[p]):
+            contact_push(M, pr, contacts[p], kin, fr, 0.0)
+
+
+@inline
+def frame_fields(acc, fr, g):
+    """The fields of the moving rachis frame per unit mass, (e_x, e_y, e_z, α_x, α_y, α_z, spinning): g⃗ − a less the
+    frame's own gravity (0, 0, −g), which field_force adds, and α, in the rachis frame; `spinning` when ω or α is not
+    zero (Euler, centrifugal and Coriolis terms)."""
+    if fr.turned == 0.0:  # R = I, ω = 0: the fields of a translating rachis (and α, which turns it from rest)
+        ex, ey, ez = -acc[0], -acc[1], -acc[2]
+        alx, aly, alz = acc[3], acc[4], acc[5]
+    else:
+        ax, ay, az = to_rachis(fr, acc[0], acc[1], acc[2])
+        gx, gy, gz = to_rachis(fr, 0.0, 0.0, -g)
+        ex, ey, ez = gx - ax, gy - ay, gz + g - az  # the field g⃗ − a, less the rachis-frame gravity (0, 0, −g)
+        alx, aly, alz = to_rachis(fr, acc[3], acc[4], acc[5])
+    spinning = fr.ox != 0.0 or fr.oy != 0.0 or fr.oz != 0.0 or alx != 0.0 or aly != 0.0 or alz != 0.0
+    return ex, ey, ez, alx, aly, alz, spinning
+
+
+@inline
+def field_force(m, k, fields, fr, g, work):
+    """F of a berry of mass m (stage 1 in k) from gravity and the frame's fields (frame_fields), into k; returns
+    work plus the fields' power on its motion relative to the rachis."""
+    ex, ey, ez, alx, aly, alz, spinning = fields
+    ox, oy, oz = fr.ox, fr.oy, fr.oz
+    fx, fy, fz = ex, ey, ez
+    if spinning:  # Euler −α × p, centrifugal −ω × (ω × p); Coriolis −2 ω × ṗ below (it does no work)
+        px, py, pz = k.px, k.py, k.pz
+        cx, cy, cz = oy * pz - oz * py, oz * px - ox * pz, ox * py - oy * px
+        fx -= aly * pz - alz * py + oy * cz - oz * cy
+        fy -= alz * px - alx * pz + oz * cx - ox * cz
+        fz -= alx * py - aly * px + ox * cy - oy * cx
+    work += m * (fx * k.vx + fy * k.vy + fz * k.vz)
+    k.fx = m * fx
+    k.fy = m * fy
+    k.fz = m * (fz - g)
+    if spinning:
+        k.fx -= 2.0 * m * (oy * k.vz - oz * k.vy)
+        k.fy -= 2.0 * m * (oz * k.vx - ox * k.vz)
+        k.fz -= 2.0 * m * (ox * k.vy - oy * k.vx)
+    return work
+
+
+@inline
+def coupling_push(cp, berry, kin):
+    """A coupling's force into its two berries' F (stage 1 in kin); returns its ṡ."""
+    fc, _, sep_dot = coupling(cp, berry[cp.i], berry[cp.j], kin[cp.i], kin[cp.j])
+    kin[cp.i].fx += fc
+    kin[cp.j].fx -= fc
+    return sep_dot
+
+
+@inline
+def contact_push(M, pr, c, kin, fr, work):
+    """An active pair's force into its berries' F (−F n on i, +F n on j; an obstacle takes it): (F, its dissipation
+    power, work plus the base's power through an obstacle fixed in the world)."""
+    delta, delta_dot, nx, ny, nz = contact_gap(M, pr, kin)
+    f, power = pair_force(pr, c, delta, delta_dot)
+    if f != 0.0:
+        ki = kin[pr.i]
+        if fixed_in_world(M, pr):  # the normal of an obstacle fixed in the world is in the world frame
+            # F n·(ẋ − R ṗ): the obstacle's push on the berry as the rachis carries it, ḃ + R (ω × p)
+            work += f * (nx * ki.wvx + ny * ki.wvy + nz * ki.wvz)
+            nx, ny, nz = to_rachis(fr, nx, ny, nz)
+            work -= f * (nx * ki.vx + ny * ki.vy + nz * ki.vz)
+        ki.fx -= f * nx
+        ki.fy -= f * ny
+        ki.fz -= f * nz
+        if pr.j < M.berry.shape[0]:
+            kj = kin[pr.j]
+            kj.fx += f * nx
+            kj.fy += f * ny
+            kj.fz += f * nz
+    return f, power, work
 
 
 @inline

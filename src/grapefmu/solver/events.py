@@ -22,6 +22,7 @@ EV_DELTA, EV_PHI = 0, 1
 EV_FORCE = 2           # not an event: the pair's force, for the peak search (sampling.py), through the same maximiser
 N_SAMPLES = 4          # sub-intervals per step searched for a sign change (plus local-maximum refinement)
 ROOT_TOL = 1e-13       # s, absolute tolerance of event times
+GOLDEN = 0.3819660112501051  # golden section, 1 − 1/φ (Brent's maximiser, brent_point)
 
 
 @inline
@@ -124,15 +125,13 @@ def graze_possible(va, vb, sa, sb):
 
 @jit
 def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work, graze):
-    """The largest sign·fn on [a, b] (θ units; fa, fb its values there), by Brent's method (parabolic steps, golden
-    ones where a parabola does not help): returns (θ, value) once the bracket is ROOT_TOL wide, or for a graze
-    search (`graze`) as soon as a value is positive or the largest is far below zero. A graze and a force peak are
-    smooth maxima, so the parabolic steps converge in a few evaluations where golden sections alone took thirty
-    to forty."""
+    """The largest sign·fn on [a, b] (θ units; fa, fb its values there), by Brent's method (brent_point): returns
+    (θ, value) once the bracket is ROOT_TOL wide, or for a graze search (`graze`) as soon as a value is positive or
+    the largest is far below zero. A graze and a force peak are smooth maxima, so the parabolic steps converge in a
+    few evaluations where golden sections alone took thirty to forty."""
     pr = M.pair[p]
-    cg = 0.3819660112501051  # golden section, 1 − 1/φ
     tol = ROOT_TOL / h
-    x = w = v = a + cg * (b - a)
+    x = w = v = a + GOLDEN * (b - a)
     dense_pair(x, y0, q, h, work, M, pr)
     fx = value_at(fn, sign, p, work, M, contacts, kin)
     fw = fv = fx
@@ -140,46 +139,64 @@ def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work, graz
     for _ in range(60):
         if graze and (fx > 0.0 or far_below(fx, fa, fb)):
             break
-        xm = 0.5 * (a + b)
-        tol1 = tol + 1e-15 * abs(x)
-        if abs(x - xm) <= 2.0 * tol1 - 0.5 * (b - a):
+        done, u, d, e = brent_point(a, b, x, w, v, fx, fw, fv, d, e, tol)
+        if done:
             break
-        golden = True
-        if abs(e) > tol1:  # a parabola through x, w, v (maximising: the signs of scipy's minimiser turned)
-            r = (x - w) * (fv - fx)
-            t = (x - v) * (fw - fx)
-            num = (x - v) * t - (x - w) * r
-            den = 2.0 * (t - r)
-            if den > 0.0:
-                num = -num
-            den = abs(den)
-            if abs(num) < abs(0.5 * den * e) and den * (a - x) < num < den * (b - x):
-                e, d = d, num / den
-                golden = False
-                if (x + d) - a < 2.0 * tol1 or b - (x + d) < 2.0 * tol1:
-                    d = tol1 if xm >= x else -tol1
-        if golden:
-            e = (a - x) if x >= xm else (b - x)
-            d = cg * e
-        u = x + (d if abs(d) >= tol1 else (tol1 if d > 0.0 else -tol1))
         dense_pair(u, y0, q, h, work, M, pr)
         fu = value_at(fn, sign, p, work, M, contacts, kin)
-        if fu >= fx:
-            if u >= x:
-                a, fa = x, fx
-            else:
-                b, fb = x, fx
-            v, fv, w, fw, x, fx = w, fw, x, fx, u, fu
-        else:
-            if u < x:
-                a, fa = u, fu
-            else:
-                b, fb = u, fu
-            if fu >= fw or w == x:
-                v, fv, w, fw = w, fw, u, fu
-            elif fu >= fv or v == x or v == w:
-                v, fv = u, fu
+        a, fa, b, fb, x, fx, w, fw, v, fv = brent_keep(u, fu, a, fa, b, fb, x, fx, w, fw, v, fv)
     return x, fx
+
+
+@inline
+def brent_point(a, b, x, w, v, fx, fw, fv, d, e, tol):
+    """Brent's maximiser on [a, b] (scipy's minimiser with its signs turned): x the best point so far, w and v the
+    two before it, d and e its last two steps. Returns (done, u, d, e): done once x is within the tolerance of the
+    bracket's middle, else the next point u, by a parabola through x, w, v where it helps, else a golden section.
+    The one step both peak searches take (largest_on here, sampling.largest_tension)."""
+    xm = 0.5 * (a + b)
+    tol1 = tol + 1e-15 * abs(x)
+    if abs(x - xm) <= 2.0 * tol1 - 0.5 * (b - a):
+        return True, x, d, e
+    golden = True
+    if abs(e) > tol1:  # a parabola through x, w, v (maximising: the signs of scipy's minimiser turned)
+        r = (x - w) * (fv - fx)
+        t = (x - v) * (fw - fx)
+        num = (x - v) * t - (x - w) * r
+        den = 2.0 * (t - r)
+        if den > 0.0:
+            num = -num
+        den = abs(den)
+        if abs(num) < abs(0.5 * den * e) and den * (a - x) < num < den * (b - x):
+            e, d = d, num / den
+            golden = False
+            if (x + d) - a < 2.0 * tol1 or b - (x + d) < 2.0 * tol1:
+                d = tol1 if xm >= x else -tol1
+    if golden:
+        e = (a - x) if x >= xm else (b - x)
+        d = GOLDEN * e
+    return False, x + (d if abs(d) >= tol1 else (tol1 if d > 0.0 else -tol1)), d, e
+
+
+@inline
+def brent_keep(u, fu, a, fa, b, fb, x, fx, w, fw, v, fv):
+    """The bracket (a, b) and Brent's three best points (x, w, v) once the value fu at u is known."""
+    if fu >= fx:
+        if u >= x:
+            a, fa = x, fx
+        else:
+            b, fb = x, fx
+        v, fv, w, fw, x, fx = w, fw, x, fx, u, fu
+    else:
+        if u < x:
+            a, fa = u, fu
+        else:
+            b, fb = u, fu
+        if fu >= fw or w == x:
+            v, fv, w, fw = w, fw, u, fu
+        elif fu >= fv or v == x or v == w:
+            v, fv = u, fu
+    return a, fa, b, fb, x, fx, w, fw, v, fv
 
 
 @jit

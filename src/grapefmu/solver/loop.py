@@ -40,6 +40,8 @@ class Buffers(NamedTuple):
     fbuf: np.ndarray     # (N_SAMPLES + 1, P) force of each near pair at each sample
     pwbuf: np.ndarray    # (N_SAMPLES + 1, P) its dissipation power
     cls: np.ndarray      # (N_SAMPLES + 1, P) its mode class (smooth pairs)
+    tension: np.ndarray  # (N_SAMPLES + 1, N) each berry's pedicel tension at each sample
+    pushing: np.ndarray  # (P,) the near pairs in contact (sampling.refine_tensions)
     values: np.ndarray   # (N_SAMPLES + 1, 2P) its event functions
     rates: np.ndarray    # (N_SAMPLES + 1, 2P) their slopes (δ's; per sample spacing)
     W: Workspace
@@ -58,7 +60,8 @@ def buffers(M, ny, island):
     p = max(M.pair.shape[0], 1)
     return Buffers(np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny), np.empty(ny),
                    np.zeros((N_SAMPLES + 1, p)), np.zeros((N_SAMPLES + 1, p)),
-                   np.zeros((N_SAMPLES + 1, p), dtype=np.int64), np.zeros((N_SAMPLES + 1, 2 * p)),
+                   np.zeros((N_SAMPLES + 1, p), dtype=np.int64), np.zeros((N_SAMPLES + 1, M.berry.shape[0])),
+                   np.zeros(p, dtype=np.int64), np.zeros((N_SAMPLES + 1, 2 * p)),
                    np.zeros((N_SAMPLES + 1, 2 * p)), workspace(M),
                    samples_for(M), np.zeros((M.berry.shape[0], 2)), np.ones(p, dtype=np.bool_),
                    np.zeros((M.n_dof + 1 if island else 0, 3)), np.zeros(M.berry.shape[0] if island else 0),
@@ -222,7 +225,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         if R.cursor[0].grid_dt > 0.0 and not record_grid(t0, t_commit, h, P.y, q, X, inp, C, Bk.totals, R):
             return OUT_FULL
         sample_step(t0, h, theta_e, P.y, q, M, X, inp, C, B.near, B.count[0], Bk.totals, Bk.pair, Bk.peak_tension, cfg,
-                    W, work, fbuf, pwbuf, cls, samples, sampled, start_sampled)
+                    W, work, fbuf, pwbuf, cls, Z.tension, Z.pushing, samples, sampled, start_sampled)
         # --- commit
         I.y_prev[:] = P.y
         if event:

@@ -1,18 +1,18 @@
-"""The committed part of each step, sampled: peaks of contact force and pedicel tension (the force
-refined around an interior maximum), each near pair's mode class at every sample (for the Zeno
+"""The committed part of each step, sampled: peaks of contact force and pedicel tension (each refined around a
+maximum between samples that could raise it), each near pair's mode class at every sample (for the Zeno
 guard), and the per-pair impulse and dissipation integrals (Boole's rule, docs/model.md §6)."""
 from __future__ import annotations
 
 import numpy as np
 
-from ..physics.compiled import jit
+from ..physics.compiled import inline, jit
 from ..physics.damage import detaching
 from ..physics.excitation import applied_accel
-from ..physics.forces import active, forces, pair_force, pedicel_tension
-from ..physics.kinematics import Workspace, kinematics, pair_state, rachis_frame
+from ..physics.forces import active, berry_force, forces, pair_force, pedicel_tension
+from ..physics.kinematics import Workspace, berry_kinematics, kinematics, pair_state, rachis_frame
 from ..physics.layout import model_head
-from .events import EV_FORCE, N_SAMPLES, check_bruising, classify, largest_on
-from .step import dense_head, dense_pair, dense_rachis
+from .events import EV_FORCE, GOLDEN, N_SAMPLES, ROOT_TOL, brent_keep, brent_point, check_bruising, classify, largest_on
+from .step import dense_berry, dense_head, dense_pair, dense_rachis
 
 #: Boole's rule on the N_SAMPLES + 1 equally spaced samples: exact for quintics; its error per step,
 #: O(h^7), stays below DOPRI5's local error O(h^6)
@@ -26,6 +26,9 @@ BOOLE = np.array([7.0, 32.0, 12.0, 32.0, 7.0]) / 90.0
 #: collision) to 7 % (shaken stiff pair, 230 impacts) slower at rtol 1e-6, for no accuracy a DOPRI5 step can use.
 _NODES, _WEIGHTS = np.polynomial.legendre.leggauss(N_SAMPLES + 1)  # on [-1, 1]
 GAUSS_X, GAUSS_W = 0.5 * (_NODES + 1.0), 0.5 * _WEIGHTS
+#: a bracket whose bound exceeds a berry's peak tension by less than this fraction of it is not searched
+#: (refine_tensions): the ripples of a berry hanging still are round-off
+PEAK_GAIN = 1e-12
 
 
 @jit
@@ -58,7 +61,7 @@ def integrate_gauss(h, theta_end, y0, q, M, contacts, near, nnear, book_pair, ki
 
 @jit
 def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, totals, book_pair, peak_tension, cfg, W,
-                work, fbuf, pwbuf, cls, samples, sampled, start_sampled):
+                work, fbuf, pwbuf, cls, tbuf, pushing, samples, sampled, start_sampled):
     """Book the step up to θ = theta_end.
 
     Every berry's pedicel tension is sampled at θ = k / N_SAMPLES inside the committed part (its end is the next
@@ -69,7 +72,8 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
     cluster's event step evaluates the pairs in contact and not every berry again.
     start_sampled: this step's start is the last step's end, sampled there in the same modes on the same near list
     (loop.integrate), so its tensions are booked and its pairs' row is that step's last: copied, not evaluated again
-    (a fifth of the samples on a step that follows a whole one)."""
+    (a fifth of the samples on a step that follows a whole one).
+    Each berry's tensions at the samples stay in tbuf (N_SAMPLES + 1, N), for refine_tensions (pushing: its scratch)."""
     tot = totals[0]
     berry, kin = M.berry, W.berry
     span = theta_end * h
@@ -77,6 +81,9 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
     if start_sampled:
         for kk in range(nnear):
             fbuf[0, kk], pwbuf[0, kk], cls[0, kk] = fbuf[N_SAMPLES, kk], pwbuf[N_SAMPLES, kk], cls[N_SAMPLES, kk]
+        for i in range(berry.shape[0]):
+            tbuf[0, i] = tbuf[N_SAMPLES, i]
+    last = 0  # the last sample taken
     for k in range(1 if start_sampled else 0, N_SAMPLES + 1):
         th = k / N_SAMPLES
         if not whole and k > 0 and th >= theta_end:
@@ -104,13 +111,9 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
                         dense_pair(th, y0, q, h, work, M, M.pair[p])
                     cls[k, kk] = classify(p, work, M, contacts, at, contacts[p].mode)[0]
         for i in range(berry.shape[0]):
-            tension = pedicel_tension(berry[i], at[i])
-            if tension > peak_tension[i]:
-                if detaching(tension, cfg.detachment_force) and not detaching(peak_tension[i], cfg.detachment_force):
-                    tot.berries_over_detachment_force += 1
-                peak_tension[i] = tension
-                if tension > tot.peak_pedicel_tension:
-                    tot.peak_pedicel_tension = tension
+            tbuf[k, i] = pedicel_tension(berry[i], at[i])
+            book_tension(i, tbuf[k, i], peak_tension, tot, cfg)
+        last = k
     if not whole:
         for kk in range(nnear):
             p = near[kk]
@@ -186,3 +189,137 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
             bp.impact_peak_time = t0 + tbest * h
         if c.mode != 0:
             check_bruising(bp, tot, M, M.pair[p], cfg)
+    refine_tensions(t0, h, theta_end, last, y0, q, M, X, inp, contacts, near, nnear, tbuf, pushing, peak_tension, tot,
+                    cfg, kin, work)
+
+
+@inline
+def book_tension(i, tension, peak_tension, tot, cfg):
+    """Berry i's pedicel tension at a point of the step: its peak and the run's raised, a berry that passes the
+    detachment force counted once."""
+    if tension > peak_tension[i]:
+        if detaching(tension, cfg.detachment_force) and not detaching(peak_tension[i], cfg.detachment_force):
+            tot.berries_over_detachment_force += 1
+        peak_tension[i] = tension
+        if tension > tot.peak_pedicel_tension:
+            tot.peak_pedicel_tension = tension
+
+
+@inline
+def refine_tensions(t0, h, theta_end, last, y0, q, M, X, inp, contacts, near, nnear, tbuf, pushing, peak_tension, tot,
+                    cfg, kin, work):
+    """Each berry's largest pedicel tension between its samples, where it could raise the berry's peak (docs/solver.md,
+    "Peaks"), as for a contact force's peak. The points are the samples θ_j = j/N_SAMPLES (j ≤ last) and, on a step an
+    event cut short, the committed part's end θ_e (its tension taken here when needed; the next step's first sample
+    books it). The largest point's neighbours bracket the maximum, and 2·largest − the lower neighbour bounds what the
+    bracket can hold; a largest point at an end is a maximum only if the tension turns just inside it (a probe, where
+    the samples say it may: turns_near).
+    Why: the samples alone missed a peak between them by up to a quarter of the spacing's curvature, so the booked
+    peak did not converge with the tolerance (1.9e-3 relative at rtol 1e-8 on a 100-berry cluster, whose DOP853 steps
+    are long: benchmarks/peak_tension.py). The evaluations are a berry's and its neighbours' (tension_at), over the
+    pairs in contact (`pushing`, scratch (P,)), not every near pair."""
+    npush = 0
+    for kk in range(nnear):
+        if active(contacts[near[kk]]):
+            pushing[npush] = near[kk]
+            npush += 1
+    whole = theta_end == 1.0
+    m = last if whole else last + 1  # the committed part's end point
+    th_m = 1.0 if whole else theta_end
+    for i in range(M.berry.shape[0]):
+        kb = 0
+        for k in range(1, last + 1):
+            if tbuf[k, i] > tbuf[kb, i]:
+                kb = k
+        best = tbuf[kb, i]
+        t_m = tbuf[last, i]
+        if not whole and kb == last:  # the committed part runs on for less than a spacing past the last sample
+            if last >= 2 and not turns_near(tbuf[last, i], tbuf[last - 1, i], tbuf[last - 2, i]):
+                continue  # rising for a spacing more, past θ_e: the next step's first sample is the largest
+            if last >= 1 and not best + 2.0 * (best - tbuf[last - 1, i]) - peak_tension[i] > \
+                    PEAK_GAIN * abs(peak_tension[i]):
+                continue  # twice the last spacing's rise again does not reach the peak
+            t_m = tension_at(theta_end, i, t0, y0, q, h, M, X, inp, contacts, pushing, npush, kin, work)
+            if t_m > best:
+                kb, best = m, t_m
+        if 0 < kb < m:
+            a, b = (kb - 1) / N_SAMPLES, (th_m if kb + 1 == m else (kb + 1) / N_SAMPLES)
+            low = min(tbuf[kb - 1, i], t_m if kb + 1 == m else tbuf[kb + 1, i])
+        elif kb == 0:
+            a, b = 0.0, (th_m if m == 1 else 1.0 / N_SAMPLES)
+            low = t_m if m == 1 else tbuf[1, i]
+        else:
+            a, b = (m - 1) / N_SAMPLES, th_m
+            low = tbuf[m - 1, i]
+        if not 2.0 * best - low - peak_tension[i] > PEAK_GAIN * abs(peak_tension[i]):
+            continue  # the bracket cannot hold more than the peak (a berry hanging still samples ripples of 1e-16)
+        if kb == 0 or kb == m:  # at an end: a maximum only if the tension turns just inside it
+            if whole and not (turns_near(tbuf[0, i], tbuf[1, i], tbuf[2, i]) if kb == 0 else
+                              turns_near(tbuf[m, i], tbuf[m - 1, i], tbuf[m - 2, i])):
+                continue
+            probe = a + 1e-3 * (b - a) if kb == 0 else b - 1e-3 * (b - a)
+            if tension_at(probe, i, t0, y0, q, h, M, X, inp, contacts, pushing, npush, kin, work) <= best:
+                continue
+        book_tension(i, largest_tension(i, a, b, t0, y0, q, h, M, X, inp, contacts, pushing, npush, kin, work),
+                     peak_tension, tot, cfg)
+
+
+@inline
+def turns_near(t_end, t_1, t_2):
+    """Whether a function sampled t_end at a step's end and t_1, t_2 one and two spacings inside, largest at the end, may
+    turn inside the end's interval: the parabola through the three is concave and its vertex lies less than a spacing
+    beyond the end (its slope there, in spacings, above −curvature; a spacing's room for what the parabola leaves
+    out). Else the tension rises into the end (or falls from it) for a spacing more, which the next step (or the last)
+    samples: no probe. A steady rise, the common case on a lift, is judged without an evaluation."""
+    d2 = t_end - 2.0 * t_1 + t_2
+    if d2 >= 0.0:
+        return False
+    return (3.0 * t_end - 4.0 * t_1 + t_2) / 2.0 < -d2
+
+
+@jit
+def largest_tension(i, a, b, t0, y0, q, h, M, X, inp, contacts, near, nnear, kin, work):
+    """Berry i's largest pedicel tension on [a, b] (θ units) by Brent's maximiser (events.brent_point), to ROOT_TOL."""
+    tol = ROOT_TOL / h
+    x = w = v = a + GOLDEN * (b - a)
+    fx = tension_at(x, i, t0, y0, q, h, M, X, inp, contacts, near, nnear, kin, work)
+    fw = fv = fx
+    fa = fb = d = e = 0.0
+    for _ in range(60):
+        done, u, d, e = brent_point(a, b, x, w, v, fx, fw, fv, d, e, tol)
+        if done:
+            break
+        fu = tension_at(u, i, t0, y0, q, h, M, X, inp, contacts, near, nnear, kin, work)
+        a, fa, b, fb, x, fx, w, fw, v, fv = brent_keep(u, fu, a, fa, b, fb, x, fx, w, fw, v, fv)
+    return fx
+
+
+@jit
+def tension_at(theta, i, t0, y0, q, h, M, X, inp, contacts, near, nnear, kin, work):
+    """Berry i's pedicel tension at θ on the step's dense output: stage 1 of berry i and of the berries that push it
+    (its couplings, its pairs in contact among the first nnear of `near`), then its F (forces.berry_force), which is
+    the number a sample there gives it, for the cost of one berry and its neighbours."""
+    dense_rachis(theta, y0, q, h, work, M)
+    fr = rachis_frame(work, M)
+    berry_at(theta, i, y0, q, h, M, kin, work, fr)
+    for k in range(M.coupling.shape[0]):
+        cp = M.coupling[k]
+        if cp.i == i or cp.j == i:
+            berry_at(theta, cp.j if cp.i == i else cp.i, y0, q, h, M, kin, work, fr)
+    for kk in range(nnear):
+        p = near[kk]
+        pr = M.pair[p]
+        if (pr.i == i or pr.j == i) and active(contacts[p]):
+            j = pr.j if pr.i == i else pr.i
+            if j < M.berry.shape[0]:
+                berry_at(theta, j, y0, q, h, M, kin, work, fr)
+    berry_force(i, applied_accel(X, inp, t0 + theta * h, t0), fr, contacts, M, kin, near, nnear)
+    return pedicel_tension(M.berry[i], kin[i])
+
+
+@inline
+def berry_at(theta, i, y0, q, h, M, kin, work, fr):
+    """Stage 1 of berry i at θ on the dense output into kin[i] (the rachis frame fr there)."""
+    dense_berry(theta, y0, q, h, work, M, i)
+    b, o, nd = M.berry[i], M.berry[i].dof, M.n_dof
+    berry_kinematics(b, kin[i], work[o], work[nd + o], work[o + 1], work[nd + o + 1], fr)

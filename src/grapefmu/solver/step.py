@@ -42,13 +42,19 @@ def dense_pair(theta, y0, q, h, out, M, pr):
     """dense_head() for what one pair's stage 1 reads (physics/kinematics.pair_state): its berries' four entries of
     y (berry_kinematics' s, ṡ, t, ṫ) and the rachis motion. The same numbers as dense_head(), for O(1) components
     where dense_head() computes the whole head: a cluster's event and peak searches evaluate one pair at a time."""
-    nd = M.n_dof
     for i in (pr.i, pr.j):
         if i < M.berry.shape[0]:
-            o = M.berry[i].dof
-            for r in (o, o + 1, nd + o, nd + o + 1):  # o + 1 < nd + o: inside the head
-                out[r] = dense_component(theta, y0, q, h, r)
+            dense_berry(theta, y0, q, h, out, M, i)
     dense_rachis(theta, y0, q, h, out, M)
+
+
+@inline
+def dense_berry(theta, y0, q, h, out, M, i):
+    """dense_head() for berry i's four entries of y (berry_kinematics' s, ṡ, t, ṫ)."""
+    nd = M.n_dof
+    o = M.berry[i].dof
+    for r in (o, o + 1, nd + o, nd + o + 1):  # o + 1 < nd + o: inside the head
+        out[r] = dense_component(theta, y0, q, h, r)
 
 
 @inline
