@@ -42,7 +42,7 @@ class Buffers(NamedTuple):
     cls: np.ndarray      # (N_SAMPLES + 1, P) its mode class (smooth pairs)
     tension: np.ndarray  # (N_SAMPLES + 1, N) each berry's pedicel tension at each sample
     pushing: np.ndarray  # (P,) the near pairs in contact (sampling.refine_tensions)
-    values: np.ndarray   # (N_SAMPLES + 1, 2P) its event functions
+    values: np.ndarray   # (N_SAMPLES + 1, 2P) each near pair's event functions
     rates: np.ndarray    # (N_SAMPLES + 1, 2P) their slopes (δ's; per sample spacing)
     W: Workspace
     samples: np.ndarray  # (N_SAMPLES + 1, N) KINEMATICS: the berries at the step's samples
