@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 import subprocess
 import sys
+from dataclasses import replace
 
 import pytest
 
@@ -32,6 +33,8 @@ from .conftest import dual, scene
     (lambda d: d.update(gravity=-9.81), "gravity", "[0, 100]"),
     (lambda d: d.update(thresholds={"bruise_force": 0}), "thresholds.bruise_force", "(0, 10000] N"),
     (lambda d: d.update(berries=[]), "berries", "at least one"),
+    (lambda d: d["berries"][0].update(kind="spherical", angle=[0.0, 0.0], rest_angles=[1.56, 0.0]),
+     "berries[0].rest_angles[0]", "±80°"),
 ])
 def test_bad_value_is_named(mutate, key, words):
     doc = dual()
@@ -40,6 +43,24 @@ def test_bad_value_is_named(mutate, key, words):
         scene(doc)
     assert ei.value.key == key
     assert words in str(ei.value)
+
+
+@pytest.mark.parametrize("change, key", [
+    (lambda sc: replace(sc, model=replace(sc.model, berries=(replace(sc.model.berries[0], hinge_stiffness=math.nan),
+                                                              sc.model.berries[1]))), "berries[0].hinge_stiffness"),
+    (lambda sc: replace(sc, model=replace(sc.model, pairs=(replace(sc.model.pairs[0], law=replace(
+        sc.model.pairs[0].law, stiffness=math.inf)),))), "contact[0].stiffness"),
+    (lambda sc: replace(sc, angular_velocities=(0.0, math.nan)), "angular_velocities[1]"),
+    (lambda sc: replace(sc, angles=(0.0,)), "angles"),
+])
+def test_scene_built_in_code_refuses_a_number_the_core_cannot_read(change, key):
+    """A scene changed in code skips the scene file's checks: with a NaN hinge stiffness `simulate` stepped for
+    minutes to its step limit, and a short angle list failed in numpy's broadcasting. Refused where it is built,
+    naming the field."""
+    with pytest.raises(SceneError) as ei:
+        change(scene(dual()))
+    assert ei.value.key == key
+    assert "finite" in str(ei.value) or "one per angle" in str(ei.value)
 
 
 def test_invalid_toml_and_nan_in_toml():

@@ -57,8 +57,8 @@ class Obstacle:
     points away from is solid), a box (a crate wall), or a capsule (a finger pad). Fixed in the world, or
     attached to the gripper (it moves with the rachis; its coordinates are then in the rachis frame). Berries
     touching it follow its own contact law and bruise at its own thresholds (padding foam against hard
-    plastic; the laws sit on the berry–obstacle ContactPairs). The world frame is the rachis frame at t = 0
-    (docs/model.md §7)."""
+    plastic; the laws sit on the berry–obstacle ContactPairs). The world frame's origin is the rachis origin at
+    t = 0; its axes are the rachis' turned by the start orientation R₀ (docs/model.md §7)."""
 
     name: str
     kind: str                                             # OBSTACLE_KINDS
@@ -328,9 +328,35 @@ class Scene:
     name: str = "scene"
 
     def __post_init__(self):
-        why = self.model.refuses_turn(self.excitation)
+        why = self.refuses_number() or self.model.refuses_turn(self.excitation)
         if why:
             raise SceneError(*why)
+
+    def refuses_number(self) -> tuple[str, str] | None:
+        """(key, why) for the first number the compiled core would read that is not finite (or an angle list of the
+        wrong length), or None. A scene built in code skips the scene file's ranges (scenefile/parse.py): with a
+        NaN stiffness the solver stepped to its step limit, minutes without a word."""
+        m = self.model
+        for key, values in (("angles", self.angles), ("angular_velocities", self.angular_velocities)):
+            if len(values) != m.n_dof:
+                return (key, f"one per angle, {m.n_dof} ({', '.join(m.dof_names)}), got {len(values)}")
+            bad = np.flatnonzero(~np.isfinite(np.asarray(values, dtype=float)))
+            if len(bad):
+                return (f"{key}[{bad[0]}]", f"must be a finite number ({m.dof_names[bad[0]]}), got {values[bad[0]]!r}")
+        M, X = m.arrays, self.excitation.arrays
+        tables = (("berries", M.berry, lambda k: m.names[k]), ("contact", M.pair, m.pair_name),
+                  ("couplings", M.coupling, lambda k: f"{m.names[m.couplings[k].i]}_{m.names[m.couplings[k].j]}"),
+                  ("obstacles", M.obstacle, lambda k: m.obstacles[k].name))
+        for key, rows, name in tables:
+            for f in rows.dtype.names:
+                bad = np.flatnonzero(~np.isfinite(rows[f])) if rows.dtype[f].kind == "f" else ()
+                if len(bad):
+                    return (f"{key}[{bad[0]}].{f}", f"must be a finite number ({name(int(bad[0]))}), got {rows[f][bad[0]]!r}")
+        if not math.isfinite(M.gravity):
+            return ("gravity", f"must be a finite number, got {M.gravity!r}")
+        if not (np.isfinite(X.par).all() and np.isfinite(X.table).all()):
+            return ("excitation", f"every value of the {self.excitation.kind} excitation must be a finite number")
+        return None
 
     @cached_property
     def arrays(self) -> ModelArrays:

@@ -27,8 +27,8 @@ KINEMATICS = np.dtype([(f, "f8") for f in (
     "dux", "duy", "duz",                  # u̇, 1/s
     "px", "py", "pz",                     # position p = h + l u, m
     "vx", "vy", "vz",                     # velocity ṗ = l u̇, m/s
-    "wx", "wy", "wz",                     # position in the world frame p + b, m
-    "wvx", "wvy", "wvz",                  # velocity in the world frame ṗ + ḃ, m/s
+    "wx", "wy", "wz",                     # position in the world frame b + R p, m
+    "wvx", "wvy", "wvz",                  # velocity in the world frame ḃ + R (ω_r × p + ṗ), m/s
     "fx", "fy", "fz")],                   # F: every force on the berry but its hinge's, N (stage 2)
     align=True)
 #: what stage 2 computes per evaluated pair

@@ -113,8 +113,10 @@ def _total(field: str) -> Callable[[Snapshot], np.ndarray]:
 
 
 def _peak(field: str, now: Callable[[Snapshot], np.ndarray]) -> Callable[[Snapshot], np.ndarray]:
-    """The solver's peak so far (refined on the dense output) or the value now, whichever is larger."""
-    return lambda s: np.maximum(s.totals[field], now(s))
+    """The largest so far: the solver's peak (refined on the dense output, as of the step before each sample) or
+    any sample's value up to this one, whichever is larger. Without the samples' running maximum the column fell
+    back to the step's booked peak at the next sample of the same step (4.9 % below the last one on a cluster)."""
+    return lambda s: np.maximum.accumulate(np.maximum(s.totals[field], now(s)))
 
 
 def _largest(values: Callable[[Snapshot], np.ndarray]) -> Callable[[Snapshot], np.ndarray]:

@@ -155,9 +155,10 @@ def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
         q = _angles(f"{key}.angle", b.get("angle", [0.0] * nd if spherical else 0.0), nd, math.pi, "rad")
         w = _angles(f"{key}.angular_velocity", b.get("angular_velocity", [0.0] * nd if spherical else 0.0), nd, 1e3,
                     "rad/s")
-        if spherical and abs(q[0]) > MAX_SWING:
-            raise SceneError(f"{key}.angle[0]", f"a spherical berry's swing must stay within ±{math.degrees(MAX_SWING):g}° "
-                             f"(±{MAX_SWING:.4g} rad), got {q[0]!r}")
+        for field, what, swing in (("angle[0]", "swing", q[0]), ("rest_angles[0]", "rest swing", rest[0])):
+            if spherical and abs(swing) > MAX_SWING:  # the chart is singular at 90° (docs/model.md §1)
+                raise SceneError(f"{key}.{field}", f"a spherical berry's {what} must stay within "
+                                 f"±{math.degrees(MAX_SWING):g}° (±{MAX_SWING:.4g} rad), got {swing!r}")
         angles.extend(q)
         rates.extend(w)
         berries.append(Berry(nm, mass, radius, length, hinge[0], kh, ch, hinge[1], hinge[2], spherical, azimuth, rest))

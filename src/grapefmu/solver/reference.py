@@ -27,11 +27,13 @@ from ..physics.compiled import jit
 from ..physics.forces import CONTACT, pair_force
 from ..physics.kinematics import pair_state, workspace
 from ..physics.layout import initial, layout_of
+from ..physics.observe import empty, observe
 from ..results.contacts import ContactLog
 from ..results.impacts import IMPACT, Impacts
 from ..results.records import TOTALS
 from ..results.run import Run
 from .events import EV_DELTA, EV_PHI, classify, value_at, watched
+from .sampling import PEAK_GAIN
 
 # new mode after (old mode, function, direction of sign·function turning positive)
 TRANSITION = {(0, EV_DELTA): 1, (1, EV_DELTA): 0, (1, EV_PHI): 2, (2, EV_DELTA): 0, (2, EV_PHI): 1}
@@ -77,6 +79,8 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     seg_start_piece = 0.0
     wall = time.perf_counter()
     segments = 0
+    peak_tension = np.full(m.n_berries, -np.inf)
+    seg_end, seg_force, seg_tension = [], [], []  # each segment's end and its refined peaks, for the running columns
 
     def f(tt, yy):
         rhs(tt, seg_start_piece, yy, dy, st, M, X, scene_input, W, every, npair)
@@ -122,6 +126,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
             out_y.append(yy)
             out_contacts.append(np.repeat(st[None, :], len(seg_grid), axis=0))
             out_acc.append(np.array([base_accel(X, tg, t) for tg in seg_grid]).reshape(-1, 6))
+        force_best = 0.0
         for p in range(npair):
             if st["mode"][p] == 1 and t_new > t:
                 def neg_force(tt, p=p):
@@ -136,9 +141,15 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
                     if -r.fun > best:
                         best, tbest = -r.fun, r.x
                 peak_force[p] = max(peak_force[p], best)
+                force_best = max(force_best, best)
                 if p in open_imp and best > open_imp[p][2]:
                     open_imp[p][2] = best
                     open_imp[p][3] = tbest
+        if t_new > t:
+            seg_end.append(t_new)
+            seg_force.append(force_best)
+            seg_tension.append(_largest_tensions(sol.sol, t, t_new, st, X, M, ny, peak_tension))
+            np.maximum(peak_tension, seg_tension[-1], out=peak_tension)
         y = sol.sol(t_new) if hit else sol.y[:, -1]
         t = t_new
         if hit:
@@ -169,15 +180,58 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
               np.concatenate(out_acc), np.zeros(len(tt), dtype=TOTALS),
               impacts, peak_force, np.zeros(m.n_berries),
               {"method": f"reference ({integrator})", "rhs_evaluations": nfev, "segments": segments, "wall_time": wall})
-    # totals from the samples and the impact book (the reference keeps no running book of its own)
+    # totals from the impact book, each segment's refined peaks (as of the segment before a sample, as the
+    # event solver's are as of its step before) and the samples themselves
     tension = np.maximum.accumulate(run.pedicel_tension, axis=0)
-    run.peak_tension = tension[-1]
+    force = np.maximum.accumulate(run.contact_force.max(axis=1, initial=0.0))
+    if seg_end:
+        before = np.searchsorted(np.array(seg_end), tt, side="right") - 1  # the last segment ended by each sample
+        ended = before >= 0
+        tension[ended] = np.maximum(tension[ended], np.maximum.accumulate(np.array(seg_tension), axis=0)[before[ended]])
+        force[ended] = np.maximum(force[ended], np.maximum.accumulate(np.array(seg_force))[before[ended]])
+    run.peak_tension = np.maximum(peak_tension, tension[-1])
     run.totals["collision_count"] = np.searchsorted(np.sort(impacts.onset), tt, side="right")
     run.totals["bruising_impacts"] = [np.count_nonzero(impacts.bruising & (impacts.onset <= x)) for x in tt]
     run.totals["berries_over_detachment_force"] = detaching(tension, th.detachment_force).sum(axis=1)
     run.totals["peak_pedicel_tension"] = tension.max(axis=1)
-    run.totals["peak_contact_force"] = np.maximum.accumulate(run.contact_force.max(axis=1, initial=0.0))
+    run.totals["peak_contact_force"] = force
     return run
+
+
+def _tensions(sol, ts, contacts, X, t_ref, M, ny):
+    """Every berry's pedicel tension (len(ts), N) at the times ts of a segment's dense output (the observation's)."""
+    ys = np.ascontiguousarray(sol(ts).T[:, :ny])
+    acc = np.array([base_accel(X, x, t_ref) for x in ts]).reshape(-1, 6)
+    out = empty(len(ts), M.berry.shape[0], M.n_dof, M.pair.shape[0])
+    observe(ys, np.repeat(contacts[None, :], len(ts), axis=0), acc, M, out)
+    return out.pedicel_tension
+
+
+def _largest_tensions(sol, t0, t1, contacts, X, M, ny, peak):
+    """Each berry's largest pedicel tension on one segment [t0, t1], on its dense output: sampled at the quarter
+    points of scipy's steps, then, around each sampled maximum (the ends included) whose bracket could hold more
+    than the berry's peak so far (peak) or the segment's best sample (2·largest − the lower neighbour bounds it),
+    a bounded scalar search. The samples alone miss a peak between them by up to a quarter of their curvature,
+    so the reference's peak would depend on its step, not its tolerance (as the event solver's did:
+    docs/solver.md, "Peaks")."""
+    edges = np.concatenate(([t0], sol.ts[(sol.ts > t0) & (sol.ts < t1)], [t1]))
+    pts = np.append((edges[:-1, None] + np.diff(edges)[:, None] * np.arange(4) / 4).ravel(), t1)
+    tens = _tensions(sol, pts, contacts, X, t0, M, ny)
+    best = tens.max(axis=0)
+    lo = np.maximum(np.arange(len(pts)) - 1, 0)
+    hi = np.minimum(np.arange(len(pts)) + 1, len(pts) - 1)
+    for i in range(tens.shape[1]):
+        f = tens[:, i]
+        bound = 2.0 * f - np.minimum(f[lo], f[hi])
+        cand = np.flatnonzero((f >= f[lo]) & (f >= f[hi]) & (bound > best[i]))
+        for k in cand[np.argsort(-f[cand], kind="stable")]:  # the largest first: its search bounds the rest
+            ref = max(best[i], peak[i])
+            if not bound[k] - ref > PEAK_GAIN * abs(ref):
+                continue  # the bracket cannot hold more than what is found (ripples of round-off, too)
+            r = minimize_scalar(lambda x: -_tensions(sol, np.array([x]), contacts, X, t0, M, ny)[0, i],
+                                bounds=(pts[lo[k]], pts[hi[k]]), method="bounded", options={"xatol": 1e-13})
+            best[i] = max(best[i], -r.fun)
+    return best
 
 
 @jit
