@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 from grapefmu import simulate
+from grapefmu.solver.islands import Islands
+from grapefmu.solver.solver import Solver
 from grapefmu.recording.messages import absolute, relative
 from grapefmu.write import write_run
 
@@ -125,13 +127,25 @@ def test_example_recordings_read_back_and_replay_exactly(name):
     assert res.truncated is None and res.compared >= 2000 and res.max_deviation == 0.0
 
 
-def test_summary_counts_to_the_end_of_the_run_not_its_last_sample():
-    """t_end off the output grid, an impact after the last sample: the summary still counts it."""
-    r = simulate(scene(dual(solver={"t_end": 0.0895, "output_interval": 0.01})))
-    assert r.t[-1] < 0.0895 and len(r.impacts) == 1 and r.impacts.onset[0] > r.t[-1]
+def test_a_run_off_its_output_grid_ends_with_a_sample_at_its_end():
+    """t_end off the output grid, an impact after the last grid point: the run's last sample is its end, on every
+    path (one step size, islands, the scipy reference). Before, the samples stopped at the grid point before it, and
+    the summary read its end time and its energy there (t_end_s 0.08 s, the contacts' dissipation below the impact's
+    own), while it counted the impact."""
+    sc = scene(dual(solver={"t_end": 0.0895, "output_interval": 0.01}))
+    solver = Solver(sc)
+    r = solver.run()
+    assert r.t[-1] == 0.0895 and len(r.t) == 10 and r.t[-2] == pytest.approx(0.08)
+    np.testing.assert_allclose(r.y[-1], solver.y, rtol=1e-12, atol=1e-18)  # the dense output at the step's end
+    assert len(r.impacts) == 1 and r.impacts.onset[0] > r.t[-2]
     s = r.summary()
-    assert s["collision_count"] == 1 and s["bruising_impacts"] == int(r.impacts.bruising.sum())
+    assert s["t_end_s"] == 0.0895 and s["collision_count"] == 1 == r.columns()["collision_count"][-1]
+    assert s["bruising_impacts"] == int(r.impacts.bruising.sum())
     assert s["peak_contact_force_n"] == r.impacts.peak_force.max()
+    assert r.energy["dissipated_contact"][-1] == pytest.approx(r.impacts.dissipated.sum(), rel=1e-6)
+    for other in (Islands(sc).run(), simulate(sc, method="reference")):
+        np.testing.assert_array_equal(other.t, r.t)
+        np.testing.assert_allclose(other.angles[-1], r.angles[-1], atol=1e-6)
 
 
 def test_the_foxglove_layout_is_current_and_names_only_recorded_topics(run, tmp_path):

@@ -197,7 +197,10 @@ class Run:
         impact and per-berry figures, what the solver did, and `warnings` (results/trust.py). A quantity's key
         carries its unit as a CSV column does (catalogue.file_column: `peak_contact_force_n`, `wall_time_s`);
         counts and flags have none. `compile_time_s`: numba's compile (or cache load) before the run, when the
-        caller measured it apart (solver/warmup.py); `wall_time_s` is then the solver's time alone."""
+        caller measured it apart (solver/warmup.py); `wall_time_s` is then the solver's time alone.
+        A Run continued from an earlier `Solver.run` or `advance` of the same Solver: its peaks and detachment figures
+        are the solver's since its start (its running book, which the faces report), its impact figures are this
+        call's impacts (Run.impacts), where its columns' counts are the solver's since its start."""
         th = self.scene.thresholds
         imp = self.impacts
         per_berry = self.dissipated_per_berry()

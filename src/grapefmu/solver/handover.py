@@ -54,11 +54,12 @@ def parts(members, inside, pair_i, pair_j, coupled, dof):
 
 
 @jit
-def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid_t0, grid_dt, k0):
+def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid_t0, grid_dt, k0, grid_end):
     """Island session s over these berries, pairs and couplings of the scene's model P (local: scratch, scene body
     -> island's, berries first, then the obstacles) at time t, from the scene's G: nothing booked yet (totals,
     counters, the energy the contacts dissipated and the base did: the island's own from now on), its near list and
-    derivative made, its recorder empty and its first sample k0 of the output grid (grid_t0, grid_dt)."""
+    derivative made, its recorder empty and its first sample k0 of the output grid (grid_t0, grid_dt, to the run's
+    end grid_end)."""
     M, S = s.model, s.state
     n = P.berry.shape[0]
     dof = 0
@@ -115,7 +116,7 @@ def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid
     restart(S, M, s.excitation, s.config[0].skin)
     R = s.scratch
     cur = R.cursor[0]
-    cur.grid_t0, cur.grid_dt, cur.grid_k = grid_t0, grid_dt, k0
+    cur.grid_t0, cur.grid_dt, cur.grid_k, cur.grid_end = grid_t0, grid_dt, k0, grid_end
     cur.n_out, cur.n_impacts, cur.n_changes = 0, 0, 0
     s.buffers.members[:] = members
     s.buffers.pairs[:] = pairs

@@ -15,7 +15,6 @@ assembles into one Run of the scene: each energy term and count as the sum over 
 """
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 
@@ -30,7 +29,7 @@ from ..results.records import COUNTS, IMPACT, PEAKS, TOTALS, concat
 from ..results.run import Run
 from . import session as ses
 from . import state as st
-from .loop import IMPACTS_FULL, OUT_FULL
+from .loop import IMPACTS_FULL, OUT_FULL, grid_last
 from .drift import components, slack
 from .handover import flush_all, form, parts, retire
 from .solver import STATUS_TEXT, Solver, open_impacts, run_stats
@@ -193,7 +192,7 @@ class Islands:
         system = pool.pop() if pool else _System(self.whole, *shape, self.per + 1)
         w = self.whole
         form(system.session, w.M, self.G, members, dofs, pairs, couplings, self.local, self.scene_offsets, t, self.t0,
-             self.dt, k0)
+             self.dt, k0, self.t_end)
         self.formed += 1
         return _Segment(members, pairs, system)
 
@@ -308,7 +307,8 @@ class Islands:
         t_end = s.t_end if t_end is None else float(t_end)
         self.dt = dt = s.output_interval if output_interval is None else float(output_interval)
         self.t0 = t0 = self.whole.t
-        self.n_samples = n = int(math.floor((t_end - t0) / dt + 1e-9)) + 1
+        self.t_end = t_end
+        self.n_samples = n = grid_last(t0, t_end, dt, True) + 1
         self.per = per = max(1, int(round(self.window / dt)))
         self._start()
         wall_start = time.perf_counter()

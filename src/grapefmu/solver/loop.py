@@ -76,6 +76,17 @@ def differs(c, d):
 
 
 @jit
+def grid_last(t0, t, dt, at_end):
+    """The index of the last sample at or before t on the output grid t0 + k dt; at the run's end (at_end) past its
+    last grid point, one more: the end's own sample (record_grid clamps its time to the end). Why: a run to
+    0.0995 s sampled every 0.01 s ended its samples at 0.09 s, and its summary read its end and its energy there."""
+    k = int(math.floor((t - t0) / dt + 1e-9))
+    if at_end and t0 + k * dt < t - 1e-9 * dt:
+        k += 1
+    return k
+
+
+@jit
 def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
     """Samples on the output grid in (t0, t_commit], and each pair whose contact record the samples hold differs
     from the one logged before (results/contacts.py), at the first new sample's index on the grid (grid_k: the run's
@@ -83,7 +94,7 @@ def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
     cur = R.cursor[0]
     dt_out = cur.grid_dt
     kg = cur.grid_k
-    last = int(math.floor((t_commit - cur.grid_t0) / dt_out + 1e-9))
+    last = grid_last(cur.grid_t0, t_commit, dt_out, t_commit >= cur.grid_end)
     if last < kg:
         return True
     if last - kg + 1 > R.t.shape[0] - cur.n_out:

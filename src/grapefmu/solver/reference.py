@@ -33,6 +33,7 @@ from ..results.impacts import IMPACT, Impacts
 from ..results.records import TOTALS
 from ..results.run import Run
 from .events import EV_DELTA, EV_PHI, classify, value_at, watched
+from .loop import grid_last
 from .sampling import PEAK_GAIN
 
 # new mode after (old mode, function, direction of sign·function turning positive)
@@ -70,7 +71,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
         if st["mode"][p] != 0:
             open_imp[p] = [0.0, ddot, 0.0, 0.0, 0.0, 0.0]
     breaks = [b for b in X.breaks if 0 < b < t_end] + [t_end]
-    grid = np.linspace(0.0, t_end, int(round(t_end / dt_out)) + 1)
+    grid = np.minimum(np.arange(grid_last(0.0, t_end, dt_out, True) + 1) * dt_out, t_end)  # the event solver's samples
     out_t, out_y, out_contacts, out_acc = [], [], [], []
     peak_force = np.zeros(npair)
     dy = np.zeros(ny + 2 * npair)

@@ -178,15 +178,16 @@ def outputs(s):
 
 
 @jit
-def recording(s, samples, dt_out):
-    """A recorder for `samples` samples on the output grid every dt_out from the current time, holding the first:
+def recording(s, samples, dt_out, t_end):
+    """A recorder for `samples` samples on the output grid every dt_out from the current time to t_end (sampled too,
+    off the grid: loop.grid_last), holding the first:
     the state now (time, y, the rachis' acceleration acting, totals) and each pair's contact record (what the
     samples from here on hold). Solver.run's; one call where Python set the fields one by one."""
     S = s.state
     t, y, npair = S.physical.t[0], S.physical.y, S.physical.contacts.shape[0]
     R = recorder(samples, y.shape[0], npair, max(npair, 1) * 256)
     cur = R.cursor[0]
-    cur.grid_t0, cur.grid_dt, cur.grid_k, cur.n_out = t, dt_out, 1, 1
+    cur.grid_t0, cur.grid_dt, cur.grid_k, cur.n_out, cur.grid_end = t, dt_out, 1, 1, t_end
     R.t[0] = t
     R.y[0] = y
     R.accel[0, 0], R.accel[0, 1], R.accel[0, 2], R.accel[0, 3], R.accel[0, 4], R.accel[0, 5] = applied_accel(

@@ -29,7 +29,7 @@ from ..results.records import concat
 from ..results.run import Run
 from . import session as ses
 from . import state as st
-from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW
+from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW, grid_last
 from .tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5, Tableau
 
 #: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
@@ -318,7 +318,7 @@ class Solver:
         dt_out = s.output_interval if output_interval is None else float(output_interval)
         self._save()
         t_start = self.t
-        rec = ses.recording(self._session, int(math.floor((t_end - t_start) / dt_out + 1e-9)) + 2, dt_out)
+        rec = ses.recording(self._session, grid_last(t_start, t_end, dt_out, True) + 2, dt_out, t_end)
         cur = rec.cursor
         start = rec.logged.copy()
         chunks, changes, impacts = [], [], []  # what a full recorder handed over (rare: it is sized for the whole run)

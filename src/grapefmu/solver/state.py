@@ -46,7 +46,7 @@ BOOK_PAIR = np.dtype([("onset", "f8"), ("approach_speed", "f8"), ("impact_peak",
                       ("ring_pos", "i8")], align=True)
 #: the output grid's cursor
 CURSOR = np.dtype([("grid_t0", "f8"), ("grid_dt", "f8"), ("grid_k", "i8"), ("n_out", "i8"), ("n_impacts", "i8"),
-                   ("n_changes", "i8")])
+                   ("n_changes", "i8"), ("grid_end", "f8")])  # grid_end: the run's end, sampled on or off the grid
 
 
 class Physical(NamedTuple):
@@ -120,9 +120,11 @@ SAMPLED = 4
 def recorder(cap, ny, npair, cap_impacts):
     """Rows are read only up to the cursor's counts, each written whole before (record_grid, switch_pair): left
     uninitialised, as zero-filling a run's worth of structured rows cost more than a short run's steps."""
+    cursor = np.zeros(1, dtype=CURSOR)
+    cursor[0].grid_end = np.inf  # no run's end to sample (a face's steps) until a run sets it
     return Recorder(np.empty(cap), np.empty((cap, ny)), np.empty((cap, 6)), np.empty(cap, dtype=TOTALS),
                     np.empty(max(4 * npair, 64), dtype=CHANGE), np.zeros(npair, dtype=CONTACT),
-                    np.empty(cap_impacts, dtype=IMPACT), np.zeros(1, dtype=CURSOR))
+                    np.empty(cap_impacts, dtype=IMPACT), cursor)
 
 
 def _dotted(cls=SolverState, prefix: str = ""):
