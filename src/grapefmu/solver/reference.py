@@ -126,7 +126,7 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
             out_t.append(seg_grid)
             out_y.append(yy)
             out_contacts.append(np.repeat(st[None, :], len(seg_grid), axis=0))
-            out_acc.append(np.array([base_accel(X, tg, t) for tg in seg_grid]).reshape(-1, 6))
+            out_acc.append(_accels(X, seg_grid, t))
         force_best = 0.0
         for p in range(npair):
             if st["mode"][p] == 1 and t_new > t:
@@ -199,12 +199,16 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     return run
 
 
+def _accels(X, ts, t_ref):
+    """The rachis acceleration (len(ts), 6) at the times ts of a segment whose excitation piece holds t_ref."""
+    return np.array([base_accel(X, x, t_ref) for x in ts]).reshape(-1, 6)
+
+
 def _tensions(sol, ts, contacts, X, t_ref, M, ny):
     """Every berry's pedicel tension (len(ts), N) at the times ts of a segment's dense output (the observation's)."""
     ys = np.ascontiguousarray(sol(ts).T[:, :ny])
-    acc = np.array([base_accel(X, x, t_ref) for x in ts]).reshape(-1, 6)
     out = empty(len(ts), M.berry.shape[0], M.n_dof, M.pair.shape[0])
-    observe(ys, np.repeat(contacts[None, :], len(ts), axis=0), acc, M, out)
+    observe(ys, np.repeat(contacts[None, :], len(ts), axis=0), _accels(X, ts, t_ref), M, out)
     return out.pedicel_tension
 
 
