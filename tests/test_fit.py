@@ -164,6 +164,21 @@ def test_irregular_frame_times_are_interpolated_as_the_solver_integrates():
     assert np.abs(q - np.array(exact)).max() < 5e-5  # far below the 1 mrad of a camera
 
 
+def test_a_trial_start_state_outside_the_models_ranges_is_a_failed_trial():
+    """The optimiser's trial start state is a scene built in code: one the model refuses (an angle past π) is a failed
+    trial, which least_squares retreats from (residuals of π), as from a solver failure, not a crash of the fit."""
+    from grapefmu.errors import SolverError
+    from grapefmu.fit.shooting import Shooting
+
+    sc = scene_from_dict(copy.deepcopy(TRUTH), Path.cwd())
+    t = np.arange(20) * 0.01
+    problem = Shooting(TRUTH, Path.cwd(), [], [Measured(Path("j.csv"), t, ("left",), np.zeros((20, 1)), None)])
+    x = sc.initial_state.copy()
+    x[0] = 4.0
+    with pytest.raises(SolverError, match=r"trial start state is refused: angles\[0\]"):
+        problem.shoot(sc, t, x)
+
+
 # --- bad measured CSVs: named by column and row -------------------------------------------------------------
 
 MODEL = scene_from_dict(copy.deepcopy(TRUTH), Path.cwd()).model

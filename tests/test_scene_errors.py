@@ -9,6 +9,7 @@ from dataclasses import replace
 import pytest
 
 from grapefmu import SceneError
+from grapefmu.model.model import ContactPair, Coupling, Obstacle
 from grapefmu.scenefile import parse_scene
 
 from .conftest import dual, scene
@@ -45,22 +46,110 @@ def test_bad_value_is_named(mutate, key, words):
     assert words in str(ei.value)
 
 
-@pytest.mark.parametrize("change, key", [
-    (lambda sc: replace(sc, model=replace(sc.model, berries=(replace(sc.model.berries[0], hinge_stiffness=math.nan),
-                                                              sc.model.berries[1]))), "berries[0].hinge_stiffness"),
-    (lambda sc: replace(sc, model=replace(sc.model, pairs=(replace(sc.model.pairs[0], law=replace(
-        sc.model.pairs[0].law, stiffness=math.inf)),))), "contact[0].stiffness"),
-    (lambda sc: replace(sc, angular_velocities=(0.0, math.nan)), "angular_velocities[1]"),
-    (lambda sc: replace(sc, angles=(0.0,)), "angles"),
+def _berry(k, **change):
+    """A code change of the dual scene: berry k's fields replaced."""
+    def apply(sc):
+        berries = list(sc.model.berries)
+        berries[k] = replace(berries[k], **change)
+        return replace(sc, model=replace(sc.model, berries=tuple(berries)))
+    return apply
+
+
+def _law(**change):
+    def apply(sc):
+        pr = sc.model.pairs[0]
+        return replace(sc, model=replace(sc.model, pairs=(replace(pr, law=replace(pr.law, **change)),)))
+    return apply
+
+
+def _plate(**change):
+    """The dual scene with a floor plate (a box) under it, changed."""
+    def apply(sc):
+        box = Obstacle("plate", "box", (0.0, 0.0, -0.2), size=(0.2, 0.2, 0.02))
+        touching = tuple(ContactPair(i, 2, sc.model.pairs[0].law) for i in range(2))
+        return replace(sc, model=replace(sc.model, obstacles=(replace(box, **change),),
+                                         pairs=sc.model.pairs + touching))
+    return apply
+
+
+SPHERICAL = {"kind": "spherical", "angle": [0.0, 0.0]}
+
+
+@pytest.mark.parametrize("file_change, code_change, file_key, code_key, words", [
+    (lambda d: d["berries"][0].update(mass=-0.01), _berry(0, mass=-0.01), "berries[0].mass", "berries[0].mass",
+     "(0, 10] kg"),
+    (lambda d: d["berries"][1].update(radius=0.05), _berry(1, radius=0.05), "berries[1].radius", "berries[1].radius",
+     "smaller than twig_length"),
+    (lambda d: d["berries"][0].update(hinge_damping=-1.0), _berry(0, hinge_damping=-1.0), "berries[0].hinge_damping",
+     "berries[0].hinge_damping", "[0, 1000] N·m·s/rad"),
+    (lambda d: d["berries"][0].update(hinge_stiffness=math.nan), _berry(0, hinge_stiffness=math.nan),
+     "berries[0].hinge_stiffness", "berries[0].hinge_stiffness", "[0, 1000] N·m/rad"),
+    (lambda d: d["berries"][0].update(SPHERICAL, rest_angles=[1.56, 0.0]), _berry(0, spherical=True, rest_angles=(1.56, 0.0)),
+     "berries[0].rest_angles[0]", "berries[0].rest_angles[0]", "±80°"),
+    (lambda d: d.update(gravity=-9.81), lambda sc: replace(sc, model=replace(sc.model, gravity=-9.81)), "gravity",
+     "gravity", "[0, 100] m/s²"),
+    (lambda d: d["contact"].update(restitution=1.5), _law(restitution=1.5), "contact.restitution",
+     "contact[0].restitution", "(0, 1]"),
+    (lambda d: d["contact"].update(stiffness=math.inf), _law(stiffness=math.inf), "contact.stiffness",
+     "contact[0].stiffness", "(0, 1e+09] N/m"),
+    (lambda d: d.update(contact={"law": "hunt-crossley", "damping": 2e3}), _law(kind="hunt-crossley", damping=2e3),
+     "contact.damping", "contact[0].damping", "[0, 1000] (χ, dimensionless)"),
+    (lambda d: d.update(coupling={"stiffness": -1.0}),
+     lambda sc: replace(sc, model=replace(sc.model, couplings=(Coupling(0, 1, -1.0, 0.0),))),
+     "coupling.stiffness", "couplings[0].stiffness", "[0, 1e+06] N/m"),
+    (lambda d: d.update(obstacles=[{"name": "plate", "kind": "box", "centre": [0.0, 0.0, -0.2],
+                                    "size": [0.2, 0.0, 0.02]}]), _plate(size=(0.2, 0.0, 0.02)),
+     "obstacles[0].size", "obstacles[0].size", "edge lengths > 0 m"),
+    (lambda d: d.update(obstacles=[{"name": "plate", "kind": "box", "centre": [0.0, 0.0, -0.2], "size": [0.2, 0.2, 0.02],
+                                    "bruise_energy": -1.0}]), _plate(bruise_energy=-1.0),
+     "obstacles[0].bruise_energy", "obstacles[0].bruise_energy", "(0, 1000] J"),
+    (lambda d: d.update(solver={"rtol": 0.0}), lambda sc: replace(sc, solver=replace(sc.solver, rtol=0.0)),
+     "solver.rtol", "solver.rtol", "[1e-14, 0.1]"),
+    (lambda d: d.update(solver={"t_end": 0.5, "output_interval": 0.6}),
+     lambda sc: replace(sc, solver=replace(sc.solver, t_end=0.5, output_interval=0.6)), "solver.output_interval",
+     "solver.output_interval", "0.5"),
+    (lambda d: d.update(solver={"method": "euler"}), lambda sc: replace(sc, solver=replace(sc.solver, method="euler")),
+     "solver.method", "solver.method", "'event'"),
+    (lambda d: d.update(thresholds={"fatigue_fraction": 2.0}),
+     lambda sc: replace(sc, thresholds=replace(sc.thresholds, fatigue_fraction=2.0)), "thresholds.fatigue_fraction",
+     "thresholds.fatigue_fraction", "(0, 1]"),
+    (lambda d: d["berries"][1].update(angular_velocity=math.nan),
+     lambda sc: replace(sc, angular_velocities=(0.0, math.nan)), "berries[1].angular_velocity", "angular_velocities[1]",
+     "[-1000, 1000] rad/s"),
+    (lambda d: d["berries"][0].update(SPHERICAL, angle=[1.5, 0.0]),
+     lambda sc: replace(sc, model=replace(sc.model, berries=(replace(sc.model.berries[0], spherical=True),
+                                                             sc.model.berries[1])),
+                        angles=(1.5, 0.0, sc.angles[1]), angular_velocities=(0.0,) * 3),
+     "berries[0].angle[0]", "angles[0]", "±80°"),
 ])
-def test_scene_built_in_code_refuses_a_number_the_core_cannot_read(change, key):
-    """A scene changed in code skips the scene file's checks: with a NaN hinge stiffness `simulate` stepped for
-    minutes to its step limit, and a short angle list failed in numpy's broadcasting. Refused where it is built,
-    naming the field."""
-    with pytest.raises(SceneError) as ei:
-        change(scene(dual()))
-    assert ei.value.key == key
-    assert "finite" in str(ei.value) or "one per angle" in str(ei.value)
+def test_a_scene_built_in_code_meets_the_scene_files_ranges(file_change, code_change, file_key, code_key, words):
+    """The ranges are declared once (model/bounds.py): a scene changed in code with `dataclasses.replace` skipped the
+    scene file's checks (a NaN hinge stiffness stepped for minutes to the step limit; a negative mass, a restitution of
+    1.5 or gravity −9.81 ran). Both ways are refused, with the same range in the message."""
+    doc = dual()
+    file_change(doc)
+    with pytest.raises(SceneError) as by_file:
+        scene(doc)
+    with pytest.raises(SceneError) as by_code:
+        code_change(scene(dual()))
+    assert (by_file.value.key, by_code.value.key) == (file_key, code_key)
+    assert words in str(by_file.value) and words in str(by_code.value)
+
+
+def test_a_scene_built_in_code_refuses_a_wrong_length_list():
+    sc = scene(dual())
+    with pytest.raises(SceneError, match="one per angle, 2"):
+        replace(sc, angles=(0.0,))
+    with pytest.raises(SceneError, match="contact.0.: expected a berry and another body"):
+        replace(sc, model=replace(sc.model, pairs=(ContactPair(0, 5, sc.model.pairs[0].law),)))
+
+
+def test_hunt_crossley_restitution_whose_damping_is_out_of_range_is_refused():
+    """χ(e) grows as 1/e: a restitution of 1e-4 asks for χ = 1e4, outside the law's damping range, which the scene
+    file used to accept (a damping given as a number was refused there)."""
+    with pytest.raises(SceneError, match=r"contact.restitution: 0.0001 needs χ = 1e\+04"):
+        scene(dual(contact={"law": "hunt-crossley", "restitution": 1e-4}))
+    assert scene(dual(contact={"law": "hunt-crossley", "restitution": 0.0011})).model.pairs[0].law.damping < 1e3
 
 
 def test_invalid_toml_and_nan_in_toml():

@@ -38,7 +38,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..errors import GrapefmuError, SolverError
+from ..errors import GrapefmuError, SceneError, SolverError
 from ..model import excitation as exc
 from ..model.model import Scene
 from ..scenefile import scene_from_dict
@@ -120,7 +120,10 @@ class Shooting:
         on_grid = np.allclose(k, np.round(k), rtol=0.0, atol=1e-6)
         if not on_grid:
             dt /= 4.0  # samples between frames, then cubic Hermite (angles and rates) to each frame's time
-        sc = dataclasses.replace(scene, angles=tuple(x[:self.D]), angular_velocities=tuple(x[self.D:]))
+        try:
+            sc = dataclasses.replace(scene, angles=tuple(x[:self.D]), angular_velocities=tuple(x[self.D:]))
+        except SceneError as e:  # a trial start state outside the model's ranges: a failed trial, as the solver's are
+            raise SolverError(f"a trial start state is refused: {e}") from None
         run = Solver(sc, rtol=self.rtol, atol=self.atol, t_start=float(t[0])).run(float(t[-1]) + 0.5 * dt, dt)
         q, w = run.angles, run.angular_velocities
         if on_grid:

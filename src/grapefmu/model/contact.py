@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from enum import IntEnum
 from functools import lru_cache
 
+from .bounds import Bound
+
 
 class Law(IntEnum):
     """The contact laws of docs/model.md §3; the compiled core reads the same members as integers."""
@@ -57,6 +59,35 @@ class ContactLaw:
     @property
     def law(self) -> Law:
         return Law.from_label(self.kind)
+
+    def refusal(self) -> tuple[str, str] | None:
+        """(field, why) for a coefficient outside its law's bound (LAW_BOUNDS), or None."""
+        if self.kind not in LAWS:
+            return ("law", f"expected one of {', '.join(map(repr, LAWS))}, got {self.kind!r}")
+        for name, b in LAW_BOUNDS[self.law].items():
+            x = getattr(self, name)
+            if not b.holds(float(x)):
+                return (name, f"expected {b.allowed} for the {self.kind} law, got {x!r}")
+        if self.restitution is not None and not RESTITUTION.holds(self.restitution):
+            return ("restitution", f"expected {RESTITUTION.allowed}, got {self.restitution!r}")
+        if not self.clamp and self.law != Law.KELVIN_VOIGT:
+            return ("allow_tension", "only the kelvin-voigt law has a pulling branch to allow")
+        return None
+
+
+#: each law's coefficients: stiffness k N/m or K N/m^1.5, damping c N·s/m or the dimensionless χ (hertz: none)
+LAW_BOUNDS = {
+    Law.KELVIN_VOIGT: {"stiffness": Bound(0.0, 1e9, lo_open=True, unit="N/m"),
+                       "damping": Bound(0.0, 1e6, unit="N·s/m")},
+    Law.HERTZ: {"stiffness": Bound(0.0, 1e12, lo_open=True, unit="N/m^1.5"),
+                "damping": Bound(0.0, 0.0)},
+    Law.HUNT_CROSSLEY: {"stiffness": Bound(0.0, 1e12, lo_open=True, unit="N/m^1.5"),
+                        "damping": Bound(0.0, 1e3, unit="(χ, dimensionless)")},
+}
+#: the coefficient of restitution a law's damping is calibrated for
+RESTITUTION = Bound(0.0, 1.0, lo_open=True)
+#: E* of the Hertz laws, from which K = 4/3 E* √R*
+EFFECTIVE_MODULUS = Bound(0.0, 1e12, lo_open=True, unit="Pa")
 
 
 def kelvin_voigt_damping_ratio(e: float) -> float:

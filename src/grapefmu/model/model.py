@@ -10,10 +10,12 @@ import hashlib
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
+from numbers import Integral, Real
 from typing import NamedTuple
 
 import numpy as np
 
+from .bounds import Bound, bound, bounded, refusal
 from .contact import ContactLaw
 from ..errors import SceneError
 from .excitation import TABLE, Excitation, constant, rotation_matrix
@@ -29,21 +31,48 @@ class Berry:
     only singular pose, s = ±90°, is a twig swung sideways flat, far from any rest pose."""
 
     name: str
-    mass: float             # kg
-    radius: float           # m
-    twig_length: float      # m, hinge to berry centre
-    hinge_x: float          # m, along the rod
-    hinge_stiffness: float  # N·m/rad, torsional, per angle
-    hinge_damping: float    # N·m·s/rad
-    hinge_y: float = 0.0    # m
-    hinge_z: float = 0.0    # m
+    mass: float = bounded(0.0, 10.0, lo_open=True, unit="kg")
+    radius: float = bounded(0.0, 0.1, lo_open=True, unit="m")
+    twig_length: float = bounded(0.0, 1.0, lo_open=True, unit="m")       # hinge to berry centre
+    hinge_x: float = bounded(-10.0, 10.0, unit="m")                      # along the rod
+    hinge_stiffness: float = bounded(0.0, 1e3, unit="N·m/rad")           # torsional, per angle
+    hinge_damping: float = bounded(0.0, 1e3, unit="N·m·s/rad")
+    hinge_y: float = bounded(-10.0, 10.0, unit="m", default=0.0)
+    hinge_z: float = bounded(-10.0, 10.0, unit="m", default=0.0)
     spherical: bool = False
-    azimuth: float = 0.0    # rad, the twig frame's turn about z (spherical berries)
-    rest_angles: tuple[float, float] = (0.0, 0.0)  # rad, where the hinge exerts no torque
+    #: the twig frame's turn about z (spherical berries)
+    azimuth: float = bounded(-2 * math.pi, 2 * math.pi, unit="rad", default=0.0)
+    #: where the hinge exerts no torque
+    rest_angles: tuple[float, float] = bounded(-2 * math.pi, 2 * math.pi, unit="rad", default=(0.0, 0.0))
 
     @property
     def ndof(self) -> int:
         return 2 if self.spherical else 1
+
+    def refusal(self, key: str) -> tuple[str, str] | None:
+        """(key.field, why) for a value outside its bound or a berry the model cannot hold, or None."""
+        why = refusal(self, key)
+        if why:
+            return why
+        if self.radius >= self.twig_length:
+            return (f"{key}.radius", f"must be smaller than twig_length ({self.twig_length:g} m), got {self.radius:g} m")
+        if len(self.rest_angles) != 2:
+            return (f"{key}.rest_angles", f"expected [swing, tilt], got {self.rest_angles!r}")
+        return self.refuses_swing(f"{key}.rest_angles[0]", "rest swing", self.rest_angles[0])
+
+    def refuses_swing(self, key: str, what: str, swing: float) -> tuple[str, str] | None:
+        """(key, why) if a spherical berry's swing leaves the chart (docs/model.md §1: singular at 90°), or None."""
+        if self.spherical and abs(swing) > MAX_SWING:
+            return (key, f"a spherical berry's {what} must stay within ±{math.degrees(MAX_SWING):g}° "
+                    f"(±{MAX_SWING:.4g} rad), got {swing!r}")
+        return None
+
+
+#: a spherical twig this close to swinging sideways flat (cos s → 0) is outside the model's chart
+MAX_SWING = math.radians(80.0)
+#: a berry's initial angle (each of a spherical berry's two) and angular velocity
+ANGLE = Bound(-math.pi, math.pi, unit="rad")
+ANGULAR_VELOCITY = Bound(-1e3, 1e3, unit="rad/s")
 
 
 #: the shapes an obstacle can have (OBSTACLE.kind is the index)
@@ -62,15 +91,45 @@ class Obstacle:
 
     name: str
     kind: str                                             # OBSTACLE_KINDS
-    point: tuple[float, float, float]                     # m: a plane's point, a box's centre, a capsule's end
-    normal: tuple[float, float, float] = (0.0, 0.0, 1.0)  # plane: unit, out of the solid
-    size: tuple[float, float, float] = (0.0, 0.0, 0.0)    # box: edge lengths along its axes, m
-    yaw: float = 0.0                                      # box: its axes turned about z, rad
-    end: tuple[float, float, float] = (0.0, 0.0, 0.0)     # capsule: the other end of its axis, m
-    radius: float = 0.0                                   # capsule, m
+    #: a plane's point, a box's centre, a capsule's end
+    point: tuple[float, float, float] = bounded(-100.0, 100.0, unit="m")
+    #: plane: unit, out of the solid
+    normal: tuple[float, float, float] = bounded(-1.0, 1.0, default=(0.0, 0.0, 1.0))
+    #: box: edge lengths along its axes
+    size: tuple[float, float, float] = bounded(0.0, 100.0, unit="m", default=(0.0, 0.0, 0.0))
+    #: box: its axes turned about z
+    yaw: float = bounded(-2 * math.pi, 2 * math.pi, unit="rad", default=0.0)
+    #: capsule: the other end of its axis
+    end: tuple[float, float, float] = bounded(-100.0, 100.0, unit="m", default=(0.0, 0.0, 0.0))
+    radius: float = bounded(0.0, 10.0, unit="m", default=0.0)    # capsule
     attached: bool = False                                # moves with the gripper (rachis-frame coordinates)
-    bruise_force: float = 1.7                             # N, peak force of one impact on it that bruises
-    bruise_energy: float = 1e-3                           # J, energy dissipated in one impact on it that bruises
+    #: peak force of one impact on it that bruises
+    bruise_force: float = bounded(0.0, 1e4, lo_open=True, unit="N", default=1.7)
+    #: energy dissipated in one impact on it that bruises
+    bruise_energy: float = bounded(0.0, 1e3, lo_open=True, unit="J", default=1e-3)
+
+    def refusal(self, key: str) -> tuple[str, str] | None:
+        """(key.field, why) for a value outside its bound or a shape the core cannot hold, or None."""
+        if self.kind not in OBSTACLE_KINDS:
+            return (f"{key}.kind", f"expected one of {', '.join(map(repr, OBSTACLE_KINDS))}, got {self.kind!r}")
+        why = refusal(self, key)
+        if why:
+            return why
+        if self.kind == "plane" and abs(math.hypot(*self.normal) - 1.0) > 1e-9:
+            return (f"{key}.normal", f"expected a unit vector out of the solid, got {self.normal!r}")
+        if self.kind == "box" and min(self.size) <= 0.0:
+            return (f"{key}.size", f"expected three edge lengths > 0 m, got {self.size!r}")
+        if self.kind == "capsule" and math.dist(self.point, self.end) < MIN_CAPSULE_LENGTH:
+            return (f"{key}.end", f"the two ends must be at least {MIN_CAPSULE_LENGTH * 1e6:g} µm apart "
+                    "(a sphere is a short capsule)")
+        if self.kind == "capsule" and self.radius <= 0.0:
+            return (f"{key}.radius", f"expected {bound(Obstacle, 'radius')._replace(lo_open=True).allowed}, "
+                    f"got {self.radius!r}")
+        return None
+
+
+#: a capsule's shortest axis (m)
+MIN_CAPSULE_LENGTH = 1e-6
 
 
 @dataclass(frozen=True)
@@ -88,8 +147,8 @@ class Coupling:
 
     i: int
     j: int
-    stiffness: float  # N/m
-    damping: float    # N·s/m
+    stiffness: float = bounded(0.0, 1e6, unit="N/m")
+    damping: float = bounded(0.0, 1e4, unit="N·s/m")
 
 
 #: one berry as the compiled core reads it (docs/model.md names); a field of M.berry is a named array per property
@@ -140,7 +199,7 @@ class Model:
     berries: tuple[Berry, ...]
     pairs: tuple[ContactPair, ...] = ()
     couplings: tuple[Coupling, ...] = ()
-    gravity: float = 9.81
+    gravity: float = bounded(0.0, 100.0, unit="m/s²", default=9.81)   # its magnitude; it points along −z (world)
     pairs_pruned: int = 0   # listed or default pairs dropped because they can never touch
     obstacles: tuple[Obstacle, ...] = ()
 
@@ -206,6 +265,32 @@ class Model:
         names = self.body_names
         return f"{names[pr.i]}_{names[pr.j]}"
 
+    @cached_property
+    def refusal(self) -> tuple[str, str] | None:
+        """(scene key, why) for the first value outside its bound (bounds.py) or body the core cannot hold, or None:
+        asked once per model, by each Scene built on it."""
+        return next((why for why in self._refusals() if why), None)
+
+    def _refusals(self):
+        N, O = self.n_berries, len(self.obstacles)
+        yield refusal(self, "")
+        for k, b in enumerate(self.berries):
+            yield b.refusal(f"berries[{k}]")
+        for k, o in enumerate(self.obstacles):
+            yield o.refusal(f"obstacles[{k}]")
+        for k, c in enumerate(self.couplings):
+            if not (0 <= c.i < N and 0 <= c.j < N and c.i != c.j):
+                yield (f"couplings[{k}]", f"expected two berries of {N}, got {c.i} and {c.j}")
+            yield refusal(c, f"couplings[{k}]")
+        for k, pr in enumerate(self.pairs):
+            if not (0 <= pr.i < N and 0 <= pr.j < N + O and pr.i != pr.j):
+                yield (f"contact[{k}]", f"expected a berry and another body of {N} berries and {O} obstacles, "
+                       f"got {pr.i} and {pr.j}")
+            name, why = pr.law.refusal() or (None, None)
+            if name:
+                yield (f"obstacles[{pr.j - N}].{name}" if pr.j >= N else f"contact[{k}].{name}",
+                       f"{why} ({self.pair_name(k)})")
+
     def touches_obstacle(self, p: int) -> bool:
         return self.pairs[p].j >= self.n_berries
 
@@ -254,14 +339,14 @@ class SolverSettings:
     to imitate a fixed-step paper run); output_interval is the spacing of reported samples.
     """
 
-    method: str = "event"
-    rtol: float = 1e-8
-    atol: float = 1e-10
-    t_end: float = 2.0
-    output_interval: float = 1e-3
-    fixed_step: float = 0.0
-    zeno_window: float = 1e-3
-    zeno_max_events: int = 64
+    method: str = "event"                                         # METHODS
+    rtol: float = bounded(1e-14, 0.1, default=1e-8)
+    atol: float = bounded(1e-16, 1.0, lo_open=True, default=1e-10)
+    t_end: float = bounded(0.0, 1e5, lo_open=True, unit="s", default=2.0)
+    output_interval: float = bounded(1e-6, 1e5, unit="s", default=1e-3)   # and at most t_end
+    fixed_step: float = bounded(0.0, 1.0, unit="s", default=0.0)
+    zeno_window: float = bounded(0.0, 10.0, lo_open=True, unit="s", default=1e-3)
+    zeno_max_events: int = bounded(2, 10**6, default=64)
     #: "events": every contact onset and release is located (needed for Kelvin–Voigt's force jump);
     #: "step-control": the smooth laws (Hertz, Hunt–Crossley) are evaluated inline and the step-size
     #: control alone resolves their onsets (docs/benchmarks.md measures which is cheaper where)
@@ -270,6 +355,28 @@ class SolverSettings:
     #: a window takes its own steps. True or False, or "auto": in islands from ISLANDS_FROM berries on, where the
     #: method allows. 'event' method with adaptive steps only; the faces (FMU, node) always step the whole scene
     islands: bool | str = "auto"
+
+    def refusal(self) -> tuple[str, str] | None:
+        """(scene key, why) for a setting outside its bound or choices, or None."""
+        why = refusal(self, "solver")
+        if why:
+            return why
+        for name, allowed in (("method", METHODS), ("contact_location", CONTACT_LOCATIONS)):
+            if getattr(self, name) not in allowed:
+                return (f"solver.{name}", f"expected one of {', '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
+        if not isinstance(self.zeno_max_events, Integral):
+            return ("solver.zeno_max_events", f"expected an integer, got {self.zeno_max_events!r}")
+        if self.output_interval > self.t_end:
+            return ("solver.output_interval", f"expected at most t_end ({self.t_end:g} s), got {self.output_interval:g} s")
+        if not (self.islands == "auto" or isinstance(self.islands, bool)):
+            return ("solver.islands", f"expected true, false or \"auto\", got {self.islands!r}")
+        why = islands_refusal(self.method, self.fixed_step) if self.islands is True else None
+        return ("solver.islands", why) if why else None
+
+
+#: the solver's methods (SolverSettings.method) and ways to locate a contact's onset (contact_location)
+METHODS = ("event", "paper", "reference")
+CONTACT_LOCATIONS = ("events", "step-control")
 
 
 #: berries from which `solver.islands = "auto"` runs a scene in multirate islands: below, islands cost more than one
@@ -298,10 +405,14 @@ def islands_refusal(method: str, fixed_step: float) -> str | None:
 class Thresholds:
     """Damage and detachment thresholds; docs/parameters.md gives their sources and spread."""
 
-    detachment_force: float = 3.4   # N, pedicel tension that detaches a berry
-    bruise_force: float = 1.7       # N, peak contact force of one impact
-    bruise_energy: float = 1e-3     # J, energy dissipated in one impact
-    fatigue_fraction: float = 0.5   # impacts above this fraction of bruise_force count toward fatigue
+    #: pedicel tension that detaches a berry
+    detachment_force: float = bounded(0.0, 1e4, lo_open=True, unit="N", default=3.4)
+    #: peak contact force of one impact
+    bruise_force: float = bounded(0.0, 1e4, lo_open=True, unit="N", default=1.7)
+    #: energy dissipated in one impact
+    bruise_energy: float = bounded(0.0, 1e3, lo_open=True, unit="J", default=1e-3)
+    #: impacts above this fraction of bruise_force count toward fatigue
+    fatigue_fraction: float = bounded(0.0, 1.0, lo_open=True, default=0.5)
 
 
 def off_axis(w, n) -> bool:
@@ -328,32 +439,31 @@ class Scene:
     name: str = "scene"
 
     def __post_init__(self):
-        why = self.refuses_number() or self.model.refuses_turn(self.excitation)
+        why = (self.model.refusal or self.refuses_state() or self.solver.refusal() or refusal(self.thresholds, "thresholds")
+               or self.refuses_excitation() or self.model.refuses_turn(self.excitation))
         if why:
             raise SceneError(*why)
 
-    def refuses_number(self) -> tuple[str, str] | None:
-        """(key, why) for the first number the compiled core would read that is not finite (or an angle list of the
-        wrong length), or None. A scene built in code skips the scene file's ranges (scenefile/parse.py): with a
-        NaN stiffness the solver stepped to its step limit, minutes without a word."""
+    def refuses_state(self) -> tuple[str, str] | None:
+        """(key, why) for an initial angle or angular velocity outside its bound, a spherical swing off the chart, or
+        a list of the wrong length; None if the state holds. A scene built in code (`dataclasses.replace`) skips the
+        scene file's parser and meets the same bounds here."""
         m = self.model
-        for key, values in (("angles", self.angles), ("angular_velocities", self.angular_velocities)):
+        for key, values, b in (("angles", self.angles, ANGLE), ("angular_velocities", self.angular_velocities,
+                                                                  ANGULAR_VELOCITY)):
             if len(values) != m.n_dof:
                 return (key, f"one per angle, {m.n_dof} ({', '.join(m.dof_names)}), got {len(values)}")
-            bad = np.flatnonzero(~np.isfinite(np.asarray(values, dtype=float)))
-            if len(bad):
-                return (f"{key}[{bad[0]}]", f"must be a finite number ({m.dof_names[bad[0]]}), got {values[bad[0]]!r}")
-        M, X = m.arrays, self.excitation.arrays
-        tables = (("berries", M.berry, lambda k: m.names[k]), ("contact", M.pair, m.pair_name),
-                  ("couplings", M.coupling, lambda k: f"{m.names[m.couplings[k].i]}_{m.names[m.couplings[k].j]}"),
-                  ("obstacles", M.obstacle, lambda k: m.obstacles[k].name))
-        for key, rows, name in tables:
-            for f in rows.dtype.names:
-                bad = np.flatnonzero(~np.isfinite(rows[f])) if rows.dtype[f].kind == "f" else ()
-                if len(bad):
-                    return (f"{key}[{bad[0]}].{f}", f"must be a finite number ({name(int(bad[0]))}), got {rows[f][bad[0]]!r}")
-        if not math.isfinite(M.gravity):
-            return ("gravity", f"must be a finite number, got {M.gravity!r}")
+            for k, x in enumerate(values):
+                if isinstance(x, bool) or not isinstance(x, Real) or not b.holds(float(x)):
+                    return (f"{key}[{k}]", f"expected {b.allowed} ({m.dof_names[k]}), got {x!r}")
+        for b, first in zip(m.berries, m.dof[:-1]):
+            why = b.refuses_swing(f"angles[{first}]", "swing", self.angles[first])
+            if why:
+                return why
+        return None
+
+    def refuses_excitation(self) -> tuple[str, str] | None:
+        X = self.excitation.arrays
         if not (np.isfinite(X.par).all() and np.isfinite(X.table).all()):
             return ("excitation", f"every value of the {self.excitation.kind} excitation must be a finite number")
         return None

@@ -14,9 +14,11 @@ import numpy as np
 from ..errors import SceneError
 from ..model import excitation as exc
 from . import validate as v
-from ..model.contact import LAWS, ContactLaw, hertz_stiffness, hunt_crossley_chi, kelvin_voigt_damping
-from ..model.model import (OBSTACLE_KINDS, Berry, ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings,
-                           Thresholds, islands_refusal)
+from ..model.bounds import Bound, bound
+from ..model.contact import (EFFECTIVE_MODULUS, LAW_BOUNDS, LAWS, RESTITUTION, ContactLaw, Law, hertz_stiffness,
+                             hunt_crossley_chi, kelvin_voigt_damping)
+from ..model.model import (ANGLE, ANGULAR_VELOCITY, CONTACT_LOCATIONS, METHODS, OBSTACLE_KINDS, Berry, ContactPair,
+                           Coupling, Model, Obstacle, Scene, SolverSettings, Thresholds)
 from .budget import check_state
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
@@ -29,8 +31,6 @@ MAX_FILE_BYTES = 64 * 2**20
 TOP_KEYS = {"name", "gravity", "berries", "contact", "coupling", "obstacles", "excitation", "solver", "thresholds"}
 BERRY_KEYS = {"name", "mass", "radius", "twig_length", "hinge_x", "hinge", "hinge_stiffness", "hinge_damping",
               "angle", "angular_velocity", "kind", "azimuth", "rest_angles"}
-#: a spherical twig this close to swinging sideways flat (cos s → 0) is outside the model's chart
-MAX_SWING = math.radians(80.0)
 CONTACT_KEYS = {"law", "stiffness", "effective_modulus", "damping", "restitution", "allow_tension", "pairs"}
 COUPLING_KEYS = {"stiffness", "damping", "pairs"}
 #: each obstacle kind's own keys (required first), besides name, kind, attached, the law's and the thresholds'
@@ -101,7 +101,7 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     name = doc.get("name", name)
     if not isinstance(name, str):
         raise SceneError("name", f"expected a string, got {v.show(name)}")
-    gravity = v.number("gravity", doc.get("gravity", 9.81), 0.0, 100.0, unit="m/s²")
+    gravity = v.within("gravity", doc.get("gravity", Model.gravity), bound(Model, "gravity"))
     berries, angles, rates = _berries(doc.get("berries"))
     names = [b.name for b in berries]
     pairs, pruned = _contact(doc.get("contact"), berries) if "contact" in doc else ([], 0)
@@ -133,35 +133,30 @@ def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
         if ("hinge_x" in b) == ("hinge" in b):
             raise SceneError(f"{key}.hinge", "give hinge_x (on the rod) or hinge = [x, y, z], exactly one")
         nm = _name(key, b["name"], seen)
-        mass = v.number(f"{key}.mass", b["mass"], 0.0, 10.0, lo_open=True, unit="kg")
-        radius = v.number(f"{key}.radius", b["radius"], 0.0, 0.1, lo_open=True, unit="m")
-        length = v.number(f"{key}.twig_length", b["twig_length"], 0.0, 1.0, lo_open=True, unit="m")
-        if radius >= length:
-            raise SceneError(f"{key}.radius", f"must be smaller than twig_length ({length:g} m), got {radius:g} m")
+        mass, radius, length = (v.within(f"{key}.{f}", b[f], bound(Berry, f)) for f in ("mass", "radius", "twig_length"))
         if "hinge_x" in b:
-            hinge = (v.number(f"{key}.hinge_x", b["hinge_x"], -10.0, 10.0, unit="m"), 0.0, 0.0)
+            hinge = (v.within(f"{key}.hinge_x", b["hinge_x"], bound(Berry, "hinge_x")), 0.0, 0.0)
         else:
-            hinge = v.vector(f"{key}.hinge", b["hinge"], 3, -10.0, 10.0, "m")
-        kh = v.number(f"{key}.hinge_stiffness", b.get("hinge_stiffness", 0.0), 0.0, 1e3, unit="N·m/rad")
-        ch = v.number(f"{key}.hinge_damping", b.get("hinge_damping", 0.0), 0.0, 1e3, unit="N·m·s/rad")
+            hinge = v.vector(f"{key}.hinge", b["hinge"], 3, bound(Berry, "hinge_x"))
+        kh, ch = (v.within(f"{key}.{f}", b.get(f, 0.0), bound(Berry, f)) for f in ("hinge_stiffness", "hinge_damping"))
         spherical = v.choice(f"{key}.kind", b.get("kind", "planar"), ("planar", "spherical")) == "spherical"
         nd = 2 if spherical else 1
         if not spherical:
             for k in ("azimuth", "rest_angles"):
                 if k in b:
                     raise SceneError(f"{key}.{k}", "only for kind = \"spherical\" berries")
-        azimuth = v.number(f"{key}.azimuth", b.get("azimuth", 0.0), -2 * math.pi, 2 * math.pi, unit="rad")
-        rest = v.vector(f"{key}.rest_angles", b.get("rest_angles", [0.0, 0.0]), 2, -2 * math.pi, 2 * math.pi, "rad")
-        q = _angles(f"{key}.angle", b.get("angle", [0.0] * nd if spherical else 0.0), nd, math.pi, "rad")
-        w = _angles(f"{key}.angular_velocity", b.get("angular_velocity", [0.0] * nd if spherical else 0.0), nd, 1e3,
-                    "rad/s")
-        for field, what, swing in (("angle[0]", "swing", q[0]), ("rest_angles[0]", "rest swing", rest[0])):
-            if spherical and abs(swing) > MAX_SWING:  # the chart is singular at 90° (docs/model.md §1)
-                raise SceneError(f"{key}.{field}", f"a spherical berry's {what} must stay within "
-                                 f"±{math.degrees(MAX_SWING):g}° (±{MAX_SWING:.4g} rad), got {swing!r}")
+        azimuth = v.within(f"{key}.azimuth", b.get("azimuth", 0.0), bound(Berry, "azimuth"))
+        rest = v.vector(f"{key}.rest_angles", b.get("rest_angles", [0.0, 0.0]), 2, bound(Berry, "rest_angles"))
+        q = _angles(f"{key}.angle", b.get("angle", [0.0] * nd if spherical else 0.0), nd, ANGLE)
+        w = _angles(f"{key}.angular_velocity", b.get("angular_velocity", [0.0] * nd if spherical else 0.0), nd,
+                    ANGULAR_VELOCITY)
+        berry = Berry(nm, mass, radius, length, hinge[0], kh, ch, hinge[1], hinge[2], spherical, azimuth, rest)
+        why = berry.refusal(key) or berry.refuses_swing(f"{key}.angle[0]", "swing", q[0])
+        if why:
+            raise SceneError(*why)
         angles.extend(q)
         rates.extend(w)
-        berries.append(Berry(nm, mass, radius, length, hinge[0], kh, ch, hinge[1], hinge[2], spherical, azimuth, rest))
+        berries.append(berry)
     return berries, angles, rates
 
 
@@ -175,11 +170,11 @@ def _name(key: str, raw: Any, seen: set[str]) -> str:
     return raw
 
 
-def _angles(key: str, raw: Any, nd: int, bound: float, unit: str) -> tuple[float, ...]:
+def _angles(key: str, raw: Any, nd: int, b: Bound) -> tuple[float, ...]:
     """One number for a planar berry, [swing, tilt] for a spherical one."""
     if nd == 1:
-        return (v.number(key, raw, -bound, bound, unit=unit),)
-    return v.vector(key, raw, 2, -bound, bound, unit)
+        return (v.within(key, raw, b),)
+    return v.vector(key, raw, 2, b)
 
 
 def _within_reach(a: Berry, b: Berry) -> bool:
@@ -265,18 +260,21 @@ def _law_of(key: str, raw: dict) -> Callable[[float, float, float], ContactLaw]:
     if law == "hertz" and ("damping" in raw or "restitution" in raw):
         raise SceneError(f"{key}.{'damping' if 'damping' in raw else 'restitution'}",
                          "the hertz law is elastic; use hunt-crossley for a damped Hertz contact")
-    e = v.number(f"{key}.restitution", raw["restitution"], 0.0, 1.0, lo_open=True) if "restitution" in raw else None
-    if law == "kelvin-voigt":
-        k = v.number(f"{key}.stiffness", raw.get("stiffness", 2000.0), 0.0, 1e9, lo_open=True, unit="N/m")
-        c = None if e is not None else v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e6, unit="N·s/m")
+    e = v.within(f"{key}.restitution", raw["restitution"], RESTITUTION) if "restitution" in raw else None
+    bounds = LAW_BOUNDS[Law.from_label(law)]
+    if law == "kelvin-voigt":  # a damping from e stays in its bound: c = 2ζ√(k m*) ≤ 2√(10⁹ N/m · 10 kg)
+        k = v.within(f"{key}.stiffness", raw.get("stiffness", 2000.0), bounds["stiffness"])
+        c = None if e is not None else v.within(f"{key}.damping", raw.get("damping", 0.0), bounds["damping"])
         return lambda m_eff, r_i, r_j: ContactLaw(law, k, kelvin_voigt_damping(e, k, m_eff) if c is None else c,
                                                   clamp, e)
-    emod = (v.number(f"{key}.effective_modulus", raw["effective_modulus"], 0.0, 1e12, lo_open=True, unit="Pa")
+    emod = (v.within(f"{key}.effective_modulus", raw["effective_modulus"], EFFECTIVE_MODULUS)
             if "effective_modulus" in raw else None)
-    k = None if emod is not None else v.number(f"{key}.stiffness", raw.get("stiffness", 1.1e5), 0.0, 1e12,
-                                               lo_open=True, unit="N/m^1.5")
+    k = None if emod is not None else v.within(f"{key}.stiffness", raw.get("stiffness", 1.1e5), bounds["stiffness"])
     c = 0.0 if law == "hertz" else hunt_crossley_chi(e) if e is not None else \
-        v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e3, unit="(χ, dimensionless)")
+        v.within(f"{key}.damping", raw.get("damping", 0.0), bounds["damping"])
+    if not bounds["damping"].holds(c):
+        raise SceneError(f"{key}.restitution", f"{e!r} needs χ = {c:.4g}, outside the {law} law's damping "
+                         f"({bounds['damping'].allowed}); give a larger restitution")
     return lambda m_eff, r_i, r_j: ContactLaw(law, hertz_stiffness(emod, r_i, r_j) if k is None else k, c, clamp, e)
 
 
@@ -298,37 +296,38 @@ def _obstacles(raw: Any, berries: list[Berry], thresholds: Thresholds) -> tuple[
                 raise SceneError(f"{key}.{req}", f"missing (required for kind = {kind!r})")
         nm = _name(key, o["name"], seen)
         attached = v.choice(f"{key}.attached", o.get("attached", "world"), ("world", "gripper")) == "gripper"
-        if kind == "plane":
-            normal = np.array(v.vector(f"{key}.normal", o["normal"], 3, -1e3, 1e3))
+        point = bound(Obstacle, "point")
+        if kind == "plane":  # any length: made unit here
+            normal = np.array(v.vector(f"{key}.normal", o["normal"], 3, Bound(-1e3, 1e3)))
             length = float(np.linalg.norm(normal))
             if not length > 1e-9:
                 raise SceneError(f"{key}.normal", "expected a non-zero vector [x, y, z] pointing out of the solid")
-            shape_of = {"point": v.vector(f"{key}.point", o["point"], 3, -100.0, 100.0, "m"),
+            shape_of = {"point": v.vector(f"{key}.point", o["point"], 3, point),
                         "normal": tuple(float(x) for x in normal / length)}
             r_obstacle = math.inf
         elif kind == "box":
-            shape_of = {"point": v.vector(f"{key}.centre", o["centre"], 3, -100.0, 100.0, "m"),
-                        "size": v.vector(f"{key}.size", o["size"], 3, 0.0, 100.0, "m"),
-                        "yaw": v.number(f"{key}.yaw", o.get("yaw", 0.0), -2 * math.pi, 2 * math.pi, unit="rad")}
-            if min(shape_of["size"]) <= 0.0:
-                raise SceneError(f"{key}.size", f"expected three edge lengths > 0 m, got {v.show(o['size'])}")
+            shape_of = {"point": v.vector(f"{key}.centre", o["centre"], 3, point),
+                        "size": v.vector(f"{key}.size", o["size"], 3, bound(Obstacle, "size")),
+                        "yaw": v.within(f"{key}.yaw", o.get("yaw", 0.0), bound(Obstacle, "yaw"))}
             r_obstacle = math.inf
         else:
             ends = o["ends"]
             if not (isinstance(ends, list) and len(ends) == 2):
                 raise SceneError(f"{key}.ends", f"expected [[x, y, z], [x, y, z]] in m, got {v.show(ends)}")
-            a, b = (v.vector(f"{key}.ends[{e}]", ends[e], 3, -100.0, 100.0, "m") for e in range(2))
-            if math.dist(a, b) < 1e-6:
-                raise SceneError(f"{key}.ends", "the two ends must be at least 1 µm apart (a sphere is a short capsule)")
-            r_obstacle = v.number(f"{key}.radius", o["radius"], 0.0, 10.0, lo_open=True, unit="m")
+            a, b = (v.vector(f"{key}.ends[{e}]", ends[e], 3, point) for e in range(2))
+            r_obstacle = v.within(f"{key}.radius", o["radius"], bound(Obstacle, "radius"))
             shape_of = {"point": a, "end": b, "radius": r_obstacle}
         contact = {k: o[k] for k in CONTACT_KEYS - {"pairs"} if k in o}
         make = _law_of(key, contact)
-        force = v.number(f"{key}.bruise_force", o.get("bruise_force", thresholds.bruise_force), 0.0, 1e4,
-                         lo_open=True, unit="N")
-        energy = v.number(f"{key}.bruise_energy", o.get("bruise_energy", thresholds.bruise_energy), 0.0, 1e3,
-                          lo_open=True, unit="J")
-        out.append(Obstacle(nm, kind, attached=attached, bruise_force=force, bruise_energy=energy, **shape_of))
+        force, energy = (v.within(f"{key}.{f}", o.get(f, getattr(thresholds, f)), bound(Obstacle, f))
+                         for f in ("bruise_force", "bruise_energy"))
+        obstacle = Obstacle(nm, kind, attached=attached, bruise_force=force, bruise_energy=energy, **shape_of)
+        why = obstacle.refusal(key)
+        if why:  # the shape's own rules (a box's edges > 0, a capsule's ends apart); the scene file says centre, ends
+            where = {"point": "centre" if kind == "box" else "point", "end": "ends"}
+            name = why[0].rsplit(".", 1)[1]
+            raise SceneError(f"{key}.{where.get(name, name)}", why[1])
+        out.append(obstacle)
         j = len(berries) + n
         pairs += [ContactPair(i, j, make(b.mass, b.radius, r_obstacle)) for i, b in enumerate(berries)]
     return out, pairs
@@ -338,8 +337,7 @@ def _coupling(raw: Any, berries: list[Berry]) -> list[Coupling]:
     key = "coupling"
     v.table(key, raw)
     v.no_unknown_keys(key, raw, COUPLING_KEYS)
-    k = v.number(f"{key}.stiffness", raw.get("stiffness", 0.0), 0.0, 1e6, unit="N/m")
-    c = v.number(f"{key}.damping", raw.get("damping", 0.0), 0.0, 1e4, unit="N·s/m")
+    k, c = (v.within(f"{key}.{f}", raw.get(f, 0.0), bound(Coupling, f)) for f in ("stiffness", "damping"))
     order = sorted(range(len(berries)), key=lambda i: berries[i].hinge_x)
     neighbours = [tuple(sorted(p)) for p in zip(order, order[1:])]
     out = [Coupling(i, j, k, c) for i, j in _pair_list(f"{key}.pairs", raw.get("pairs"), berries, neighbours)]
@@ -354,25 +352,26 @@ def _solver(raw: Any) -> SolverSettings:
     v.table(key, raw)
     v.no_unknown_keys(key, raw, SOLVER_KEYS)
     d = SolverSettings()
-    t_end = v.number(f"{key}.t_end", raw.get("t_end", d.t_end), 0.0, 1e5, lo_open=True, unit="s")
+
+    def setting(name: str, b: Bound | None = None) -> float:
+        return v.within(f"{key}.{name}", raw.get(name, getattr(d, name)), b or bound(SolverSettings, name))
+
+    t_end = setting("t_end")
+    zeno = bound(SolverSettings, "zeno_max_events")
     s = SolverSettings(
-        method=v.choice(f"{key}.method", raw.get("method", d.method), ("event", "paper", "reference")),
-        rtol=v.number(f"{key}.rtol", raw.get("rtol", d.rtol), 1e-14, 0.1),
-        atol=v.number(f"{key}.atol", raw.get("atol", d.atol), 1e-16, 1.0, lo_open=True),
-        t_end=t_end,
-        output_interval=v.number(f"{key}.output_interval", raw.get("output_interval", d.output_interval),
-                                 1e-6, t_end, unit="s"),
-        fixed_step=v.number(f"{key}.fixed_step", raw.get("fixed_step", d.fixed_step), 0.0, 1.0, unit="s"),
-        zeno_window=v.number(f"{key}.zeno_window", raw.get("zeno_window", d.zeno_window), 0.0, 10.0,
-                             lo_open=True, unit="s"),
-        zeno_max_events=v.integer(f"{key}.zeno_max_events", raw.get("zeno_max_events", d.zeno_max_events), 2, 10**6),
+        method=v.choice(f"{key}.method", raw.get("method", d.method), METHODS),
+        rtol=setting("rtol"), atol=setting("atol"), t_end=t_end,
+        output_interval=setting("output_interval", bound(SolverSettings, "output_interval")._replace(hi=t_end)),
+        fixed_step=setting("fixed_step"), zeno_window=setting("zeno_window"),
+        zeno_max_events=v.integer(f"{key}.zeno_max_events", raw.get("zeno_max_events", d.zeno_max_events),
+                                  int(zeno.lo), int(zeno.hi)),
         contact_location=v.choice(f"{key}.contact_location", raw.get("contact_location", d.contact_location),
-                                  ("events", "step-control")),
+                                  CONTACT_LOCATIONS),
         islands=_islands(f"{key}.islands", raw.get("islands", d.islands)),
     )
-    why = islands_refusal(s.method, s.fixed_step) if s.islands is True else None
+    why = s.refusal()
     if why:
-        raise SceneError(f"{key}.islands", why)
+        raise SceneError(*why)
     return s
 
 
@@ -389,10 +388,10 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
     v.no_unknown_keys(key, raw, EXCITATION_KEYS[kind])
     ex = _motion(kind, raw, key, base_dir, t_end)
     if "orientation" in raw or "angular_velocity" in raw:
-        rpy = v.vector(f"{key}.orientation", raw.get("orientation", [0.0, 0.0, 0.0]), 3, -2 * math.pi, 2 * math.pi,
-                       "rad")
-        w = v.vector(f"{key}.angular_velocity", raw.get("angular_velocity", [0.0, 0.0, 0.0]), 3, -exc.MAX_ANGULAR_VELOCITY, exc.MAX_ANGULAR_VELOCITY,
-                     "rad/s")
+        rpy = v.vector(f"{key}.orientation", raw.get("orientation", [0.0, 0.0, 0.0]), 3,
+                       Bound(-2 * math.pi, 2 * math.pi, unit="rad"))
+        w = v.vector(f"{key}.angular_velocity", raw.get("angular_velocity", [0.0, 0.0, 0.0]), 3,
+                     Bound(-exc.MAX_ANGULAR_VELOCITY, exc.MAX_ANGULAR_VELOCITY, unit="rad/s"))
         ex = ex.starting(exc.quaternion_from_rpy(*rpy), w)
     return ex
 
@@ -401,12 +400,13 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
 
 def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc.Excitation:
     acc = exc.MAX_ACCEL
+    accel = Bound(-acc, acc, unit="m/s²")
+    alpha = Bound(-exc.MAX_ANGULAR_ACCEL, exc.MAX_ANGULAR_ACCEL, unit="rad/s²")
     if kind == "none":
         return exc.constant()
     if kind == "constant":
-        return exc.constant(v.linear(f"{key}.accel", raw.get("accel", [0.0, 0.0, 0.0]), -acc, acc, "m/s²"),
-                            v.vector(f"{key}.angular_accel", raw.get("angular_accel", [0.0, 0.0, 0.0]), 3, -exc.MAX_ANGULAR_ACCEL,
-                                     exc.MAX_ANGULAR_ACCEL, "rad/s²"))
+        return exc.constant(v.linear(f"{key}.accel", raw.get("accel", [0.0, 0.0, 0.0]), accel),
+                            v.vector(f"{key}.angular_accel", raw.get("angular_accel", [0.0, 0.0, 0.0]), 3, alpha))
     if kind == "csv":
         f = raw.get("file")
         if not isinstance(f, str):
@@ -432,9 +432,10 @@ def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc
             mk = f"{key}.moves[{n}]"
             v.table(mk, m)
             v.no_unknown_keys(mk, m, {"displacement", "duration", "rotation"})
-            d = v.linear(f"{mk}.displacement", m.get("displacement", [0.0, 0.0, 0.0]), -10.0, 10.0, "m")
+            d = v.linear(f"{mk}.displacement", m.get("displacement", [0.0, 0.0, 0.0]), Bound(-10.0, 10.0, unit="m"))
             T = v.number(f"{mk}.duration", m.get("duration"), 1e-3, 1e4, unit="s")
-            r = v.vector(f"{mk}.rotation", m.get("rotation", [0.0, 0.0, 0.0]), 3, -4 * math.pi, 4 * math.pi, "rad")
+            r = v.vector(f"{mk}.rotation", m.get("rotation", [0.0, 0.0, 0.0]), 3, Bound(-4 * math.pi, 4 * math.pi,
+                                                                                         unit="rad"))
             moves.append((d, T, r))
         jf = v.number(f"{key}.jerk_fraction", raw.get("jerk_fraction", 0.125), 0.0, 0.25, lo_open=True)
         ex = exc.pick_and_place(moves, start, jf)
@@ -447,14 +448,12 @@ def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc
                                              "rad/s²; lengthen a move")
         return ex
     if kind == "impulse":
-        peak = v.linear(f"{key}.peak", raw.get("peak"), -acc, acc, "m/s²")
-        angular = v.vector(f"{key}.angular_peak", raw.get("angular_peak", [0.0, 0.0, 0.0]), 3, -exc.MAX_ANGULAR_ACCEL, exc.MAX_ANGULAR_ACCEL,
-                           "rad/s²")
+        peak = v.linear(f"{key}.peak", raw.get("peak"), accel)
+        angular = v.vector(f"{key}.angular_peak", raw.get("angular_peak", [0.0, 0.0, 0.0]), 3, alpha)
         dur = v.number(f"{key}.duration", raw.get("duration", 0.01), 1e-6, 10.0, unit="s")
         return exc.impulse(peak, start, dur, angular)
-    amp = v.linear(f"{key}.amplitude", raw.get("amplitude"), -acc, acc, "m/s²")
-    angular = v.vector(f"{key}.angular_amplitude", raw.get("angular_amplitude", [0.0, 0.0, 0.0]), 3, -exc.MAX_ANGULAR_ACCEL,
-                       exc.MAX_ANGULAR_ACCEL, "rad/s²")
+    amp = v.linear(f"{key}.amplitude", raw.get("amplitude"), accel)
+    angular = v.vector(f"{key}.angular_amplitude", raw.get("angular_amplitude", [0.0, 0.0, 0.0]), 3, alpha)
     dur = v.number(f"{key}.duration", raw.get("duration", max(t_end - start, 1e-3)), 1e-3, 1e5, unit="s")
     if kind == "sine":
         f = v.number(f"{key}.frequency", raw.get("frequency"), 0.0, 1e4, lo_open=True, unit="Hz")
@@ -469,16 +468,8 @@ def _thresholds(raw: Any) -> Thresholds:
     v.table(key, raw)
     v.no_unknown_keys(key, raw, THRESHOLD_KEYS)
     d = Thresholds()
-    return Thresholds(
-        detachment_force=v.number(f"{key}.detachment_force", raw.get("detachment_force", d.detachment_force),
-                                  0.0, 1e4, lo_open=True, unit="N"),
-        bruise_force=v.number(f"{key}.bruise_force", raw.get("bruise_force", d.bruise_force), 0.0, 1e4,
-                              lo_open=True, unit="N"),
-        bruise_energy=v.number(f"{key}.bruise_energy", raw.get("bruise_energy", d.bruise_energy), 0.0, 1e3,
-                               lo_open=True, unit="J"),
-        fatigue_fraction=v.number(f"{key}.fatigue_fraction", raw.get("fatigue_fraction", d.fatigue_fraction),
-                                  0.0, 1.0, lo_open=True),
-    )
+    return Thresholds(**{f: v.within(f"{key}.{f}", raw.get(f, getattr(d, f)), bound(Thresholds, f))
+                         for f in ("detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction")})
 
 
 def _check_overlap(model: Model, angles: list[float], names: list[str]) -> None:

@@ -7,6 +7,7 @@ import reprlib
 from typing import Any
 
 from ..errors import SceneError
+from ..model.bounds import Bound
 
 _SHOW = reprlib.Repr()
 _SHOW.maxlevel, _SHOW.maxlist, _SHOW.maxdict, _SHOW.maxstring, _SHOW.maxlong, _SHOW.maxother = 3, 6, 6, 60, 30, 60
@@ -22,19 +23,20 @@ def show(value: Any) -> str:
 def number(key: str, value: Any, lo: float, hi: float, *, lo_open: bool = False,
            hi_open: bool = False, unit: str = "") -> float:
     """Return `value` as a float if it is a finite number inside the range, else raise."""
-    lb = "(" if lo_open else "["
-    rb = ")" if hi_open else "]"
-    allowed = f"a number in {lb}{lo:g}, {hi:g}{rb}{(' ' + unit) if unit else ''}"
+    return within(key, value, Bound(lo, hi, lo_open, hi_open, unit))
+
+
+def within(key: str, value: Any, b: Bound) -> float:
+    """Return `value` as a float if it is a finite number inside the bound b (a model field's: model/bounds.py),
+    else raise."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SceneError(key, f"expected {allowed}, got {type(value).__name__} {show(value)}")
+        raise SceneError(key, f"expected {b.allowed}, got {type(value).__name__} {show(value)}")
     try:
         x = float(value)
     except OverflowError:
-        raise SceneError(key, f"expected {allowed}, got {show(value)}") from None
-    if not math.isfinite(x):
-        raise SceneError(key, f"expected {allowed}, got {show(value)}")
-    if x < lo or x > hi or (lo_open and x == lo) or (hi_open and x == hi):
-        raise SceneError(key, f"expected {allowed}, got {show(value)}")
+        raise SceneError(key, f"expected {b.allowed}, got {show(value)}") from None
+    if not b.holds(x):
+        raise SceneError(key, f"expected {b.allowed}, got {show(value)}")
     return x
 
 
@@ -72,22 +74,15 @@ def no_unknown_keys(key: str, tbl: dict, known: set[str]) -> None:
         raise SceneError(f"{where}{name}", f"unknown key; allowed keys here: {', '.join(sorted(known))}")
 
 
-def vector2(key: str, value: Any, lo: float, hi: float, unit: str = "") -> tuple[float, float]:
-    if not isinstance(value, (list, tuple)) or len(value) != 2:
-        raise SceneError(key, f"expected a pair [x, y] of numbers in [{lo:g}, {hi:g}] {unit}, got {show(value)}")
-    return (number(f"{key}[0]", value[0], lo, hi, unit=unit), number(f"{key}[1]", value[1], lo, hi, unit=unit))
-
-
-def linear(key: str, value: Any, lo: float, hi: float, unit: str = "") -> tuple[float, float, float]:
+def linear(key: str, value: Any, b: Bound) -> tuple[float, float, float]:
     """A linear vector [x, y, z], or the planar pair [x, z] (y = 0)."""
     if not isinstance(value, (list, tuple)) or len(value) not in (2, 3):
-        raise SceneError(key, f"expected [x, y, z] (or the planar [x, z]) of numbers in [{lo:g}, {hi:g}] {unit}, "
-                              f"got {show(value)}")
-    v = tuple(number(f"{key}[{k}]", x, lo, hi, unit=unit) for k, x in enumerate(value))
+        raise SceneError(key, f"expected [x, y, z] (or the planar [x, z]) of {b.allowed}, got {show(value)}")
+    v = tuple(within(f"{key}[{k}]", x, b) for k, x in enumerate(value))
     return (v[0], 0.0, v[1]) if len(v) == 2 else v
 
 
-def vector(key: str, value: Any, size: int, lo: float, hi: float, unit: str = "") -> tuple[float, ...]:
+def vector(key: str, value: Any, size: int, b: Bound) -> tuple[float, ...]:
     if not isinstance(value, (list, tuple)) or len(value) != size:
-        raise SceneError(key, f"expected a list of {size} numbers in [{lo:g}, {hi:g}] {unit}, got {show(value)}")
-    return tuple(number(f"{key}[{k}]", x, lo, hi, unit=unit) for k, x in enumerate(value))
+        raise SceneError(key, f"expected a list of {size} of {b.allowed}, got {show(value)}")
+    return tuple(within(f"{key}[{k}]", x, b) for k, x in enumerate(value))
