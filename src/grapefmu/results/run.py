@@ -236,7 +236,8 @@ class Run:
 
     @property
     def collision_count(self) -> int:
-        """Impacts in the run (the catalogue's collision_count at its end)."""
+        """Impacts in this run (Run.impacts): for a run from the Solver's start, the catalogue's collision_count at its
+        end; a continued run's column counts since the Solver's start as well."""
         return len(self.impacts)
 
     @property
