@@ -308,24 +308,34 @@ LISTENER = """
 import json, sys, time
 import rclpy
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy
 from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from tf2_msgs.msg import TFMessage
 rclpy.init()
 node = rclpy.create_node("replay_listener")
-got = []
+got, latched = [], {"tf_static": 0, "robot_description": 0}
 qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 node.create_subscription(JointState, "/grape_cluster/joint_states", got.append, qos)
+# as a static-transform listener and RViz's robot model subscribe: transient local
+tl = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL)
+for cls, topic, key in ((TFMessage, "/tf_static", "tf_static"), (String, "/grape_cluster/robot_description",
+                                                                  "robot_description")):
+    node.create_subscription(cls, topic, lambda m, key=key: latched.__setitem__(key, latched[key] + 1), tl)
 print("READY", flush=True)
 end = time.monotonic() + float(sys.argv[1])
 while time.monotonic() < end:
     rclpy.spin_once(node, timeout_sec=0.01)
 last = got[-1] if got else None
 print("JSON:" + json.dumps({"n": len(got), "last_ns": last.header.stamp.sec * 10**9 + last.header.stamp.nanosec
-                           if last else None, "last": list(last.position) if last else None}), flush=True)
+                           if last else None, "last": list(last.position) if last else None, **latched}), flush=True)
 """
 
 
 def test_replay_publish_republishes_the_recorded_topics(tmp_path):
-    """`grapefmu replay --publish` of a simulate recording, received by a listener in another process."""
+    """`grapefmu replay --publish` of a simulate recording, received by a listener in another process, the latched
+    topics by transient-local subscriptions."""
     import json
     from grapefmu import simulate
     from grapefmu.write import write_run
@@ -345,6 +355,7 @@ def test_replay_publish_republishes_the_recorded_topics(tmp_path):
     out = listener.communicate(timeout=60)[0]
     res = json.loads(out.split("JSON:", 1)[1])
     assert res["n"] > 0.5 * len(run.t), f"listener: {''.join(early)}{out}\nreplay: {r.stdout}{r.stderr}"
+    assert res["tf_static"] == res["robot_description"] == 1  # republished latched (they were volatile: none)
     k = int(round(res["last_ns"] / 1e6))
     assert res["last"] == list(run.angles[k])
 

@@ -21,8 +21,8 @@ import rclpy
 import rclpy.executors
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.exceptions import ParameterException
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from scipy.spatial.transform import Rotation
 from std_srvs.srv import SetBool, Trigger
 
@@ -36,20 +36,8 @@ from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
 
 from .interfaces import message_class
+from .qos import INPUT_QOS, STATE_QOS, TOPIC_QOS
 from .recorder import McapRecorder, metadata
-
-EVENTS_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE,
-                        durability=DurabilityPolicy.VOLATILE)
-STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.RELIABLE)
-#: latched: a late subscriber (RViz, robot_state_publisher, a tf2 buffer) still gets them
-LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-#: inputs: a best-effort subscription matches both reliable and best-effort (sensor-data) publishers
-INPUT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100, reliability=ReliabilityPolicy.BEST_EFFORT)
-#: QoS per topic (default STATE_QOS)
-TOPIC_QOS = {"collision_events": EVENTS_QOS, "markers": 10, "/diagnostics": 10, "/clock": 10, "/tf": 100,
-             "/tf_static": LATCHED_QOS, "robot_description": LATCHED_QOS}
-
 
 #: (name, default, description, (low, high) or None, read-only): declared by the node, listed by --help
 PARAMETERS = [
@@ -96,6 +84,13 @@ def usage() -> str:
     return "\n".join(lines)
 
 
+def _allowed(name: str) -> str:
+    """What a parameter accepts, as an error states it."""
+    default, bounds = next((d, b) for n, d, _, b, _ in PARAMETERS if n == name)
+    kind = "a floating-point number (write 500.0, not 500)" if isinstance(default, float) else "a string"
+    return kind + (f" from {bounds[0]:g} to {bounds[1]:g}" if bounds else "")
+
+
 def _range(lo, hi):
     return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
@@ -105,9 +100,12 @@ class SimulatorNode(Node):
         kwargs.setdefault("namespace", msgs.NAMESPACE)  # `-r __ns:=/other` moves everything, frames included
         super().__init__("grapefmu", **kwargs)
         for name, default, description, bounds, read_only in PARAMETERS:
-            self.declare_parameter(name, default, ParameterDescriptor(
-                description=description, read_only=read_only,
-                floating_point_range=_range(*bounds) if bounds else []))
+            try:
+                self.declare_parameter(name, default, ParameterDescriptor(
+                    description=description, read_only=read_only,
+                    floating_point_range=_range(*bounds) if bounds else []))
+            except ParameterException as e:  # a -p value of the wrong type or outside its range: main's one line
+                raise GrapefmuError(f"parameter {name}: expected {_allowed(name)}; {e}") from None
         gp = lambda n: self.get_parameter(n).value  # noqa: E731
         self.mode = gp("mode")
         if self.mode not in ("realtime", "lockstep"):
@@ -144,6 +142,8 @@ class SimulatorNode(Node):
         self.overruns = 0
         self.tick_costs = collections.deque(maxlen=1000)  # s: the last ticks' wall time (diagnostics' percentiles)
         self.failures = 0
+        self.real_time_factor = gp("real_time_factor")
+        self.add_post_set_parameters_callback(self._on_parameters_set)
         self._reset_sim()
         if self.mode == "realtime":
             self.create_timer(1.0 / self.rate, self.on_tick)
@@ -157,8 +157,24 @@ class SimulatorNode(Node):
         return self.origin + to_ns(t)
 
     def _restart_clock(self):
-        self.wall0, self.sim0 = time.monotonic(), self.solver.t
-        self.origin = 0 if self.mode == "lockstep" else self.get_clock().now().nanoseconds - to_ns(self.solver.t)
+        """Real time runs on the node's ROS clock (wall time, or /clock under use_sim_time): simulated time sim0 at
+        clock0; the stamps' origin makes the newest state's stamp the clock's time. A clock at 0 (use_sim_time
+        before the first /clock) is not yet running: the first tick that reads it running restarts from there."""
+        self.clock0, self.sim0 = self.get_clock().now().nanoseconds, self.solver.t
+        self.origin = 0 if self.mode == "lockstep" else self.clock0 - to_ns(self.solver.t)
+
+    def _sim_target(self, clock_ns: int) -> float:
+        """The simulated time the clock's reading asks for (whole nanoseconds, so an interval can be recomputed bit
+        for bit from the recorded stamps)."""
+        return seconds(to_ns(self.sim0 + seconds(clock_ns - self.clock0) * self.real_time_factor))
+
+    def _on_parameters_set(self, params) -> None:
+        """real_time_factor: the run goes on from where the old factor has brought it, at the new one."""
+        for p in params:
+            if p.name == "real_time_factor" and self.mode == "realtime":
+                now = self.get_clock().now().nanoseconds
+                self.sim0, self.clock0 = self._sim_target(now), now
+                self.real_time_factor = p.value
 
     def _reset_sim(self):
         self.solver = Solver(self.scene, turning=True)  # whatever the scene does, inputs may turn the rachis
@@ -175,6 +191,8 @@ class SimulatorNode(Node):
         stamp = self._stamp(self.solver.t)
         for topic, m in msgs.tf_static(self.scene.model, stamp, self.prefix):
             self.emit(topic, m, stamp)
+        # a (re)start: sim_time 0, which no interval ends at, tells replay --check to start its solver again
+        self.emit("sim_time", msgs.clock(0)[1], stamp)
         self.publish_state()
 
     def advance(self, dt: float) -> bool:
@@ -368,19 +386,25 @@ class SimulatorNode(Node):
         if not np.all(np.isfinite(x)):
             self._reject(what, "values must be finite")
             return False
-        seen = self._motion[order] = (self._motion[order] + [(t, x)])[-(order + 1):]
+        seen = (self._motion[order] + [(t, x)])[-(order + 1):]
         omega = tuple(x[3:]) if order == 1 else None
         if len(seen) <= order:  # no difference yet: advance to the stamp holding what is held (and set ω)
-            return self._input(t, self.accel, what, omega=omega)
-        times = [s[0] for s in seen]
-        if not all(a < b for a, b in zip(times, times[1:])):
-            self._reject(what, "stamps must increase")
-            return False
-        rates = [_difference(a, b, order) / (tb - ta) for (ta, a), (tb, b) in zip(seen, seen[1:])]
-        raw = rates[0] if order == 1 else (rates[1] - rates[0]) / (0.5 * (times[2] - times[0]))
-        alpha = 1.0 - math.exp(-2 * math.pi * self.get_parameter("pose_filter_hz").value * (times[-1] - times[-2]))
-        self._motion_acc += alpha * (raw - self._motion_acc)
-        return self._input(t, tuple(self._motion_acc), what, omega=omega)
+            acc = self._motion_acc
+            held = self.accel
+        else:
+            times = [s[0] for s in seen]
+            if not all(a < b for a, b in zip(times, times[1:])):
+                self._reject(what, f"stamp {t:.9f} s: stamps must increase (last {times[-2]:.9f} s)")
+                return False
+            rates = [_difference(a, b, order) / (tb - ta) for (ta, a), (tb, b) in zip(seen, seen[1:])]
+            raw = rates[0] if order == 1 else (rates[1] - rates[0]) / (0.5 * (times[2] - times[0]))
+            alpha = 1.0 - math.exp(-2 * math.pi * self.get_parameter("pose_filter_hz").value * (times[-1] - times[-2]))
+            acc = self._motion_acc + alpha * (raw - self._motion_acc)
+            held = tuple(acc)
+        if not self._input(t, held, what, omega=omega):
+            return False  # a rejected sample leaves no trace: not in the differences, not in the filter
+        self._motion[order], self._motion_acc = seen, acc
+        return True
 
     # --- real time ------------------------------------------------------------------------------
     def on_tick(self):
@@ -390,9 +414,12 @@ class SimulatorNode(Node):
         self.last_tick = now
         if self.paused:
             return
-        # whole nanoseconds, so the interval can be recomputed bit for bit from the recorded stamps
-        target = seconds(to_ns(self.sim0 + (now - self.wall0) * self.get_parameter("real_time_factor").value))
-        self.advance(target - self.solver.t)
+        clock = self.get_clock().now().nanoseconds
+        if self.clock0 == 0:  # use_sim_time and no /clock yet when the run (re)started
+            if clock == 0:
+                return
+            self._restart_clock()
+        self.advance(self._sim_target(clock) - self.solver.t)
         self.tick_costs.append(time.monotonic() - now)
 
     # --- services -------------------------------------------------------------------------------

@@ -11,6 +11,7 @@ from pathlib import Path
 from mcap.writer import CompressionType
 
 from grapefmu import __version__
+from grapefmu.errors import RecordingError
 from grapefmu.recording.typestore import McapWriter
 
 CHUNK_BYTES = 64 * 1024
@@ -19,8 +20,11 @@ CHUNK_BYTES = 64 * 1024
 class McapRecorder:
     def __init__(self, path: str | Path, metadata: dict[str, str]):
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._fh = open(self.path, "wb")
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._fh = open(self.path, "wb")
+        except OSError as e:  # a directory, a path under a file, no permission: the node's one-line error
+            raise RecordingError(f"parameter record: cannot write {self.path}: {e.strerror or e}") from None
         self._w = McapWriter(self._fh, compression=CompressionType.NONE, chunk_size=CHUNK_BYTES)
         self._w.add_metadata("grapefmu", metadata)
         self.closed = False

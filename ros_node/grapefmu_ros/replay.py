@@ -17,6 +17,7 @@ from grapefmu.recording.stamps import seconds
 from grapefmu.recording.typestore import serialize
 
 from .interfaces import message_class
+from .qos import for_recorded
 
 QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 
@@ -35,7 +36,7 @@ def _publishers(node, path: str) -> dict:
             for schema, ch, _ in iter_messages(fh):
                 if ch.topic != "/clock" and ch.topic not in pubs:
                     cls = message_class(schema.name)
-                    pubs[ch.topic] = (node.create_publisher(cls, ch.topic, QOS), cls)
+                    pubs[ch.topic] = (node.create_publisher(cls, ch.topic, for_recorded(ch.topic, QOS)), cls)
         except Exception:  # noqa: BLE001 - a torn end: the topics seen so far
             pass
     return pubs

@@ -350,6 +350,9 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         # each applied interval ends at a simulated time: `sim_time`, logged at the same stamp (its header is
         # the ROS clock), or the stamp itself in recordings made before the node stamped with its clock
         sim = {ns: to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec)) for ns, m in rec.topics.get("sim_time", [])}
+        # the node's (re)starts: a sim_time of 0, which no interval ends at (recordings before it had none)
+        starts = [pos for pos, (_, m) in zip(rec.positions.get("sim_time", []), rec.topics.get("sim_time", []))
+                  if m.clock.sec == 0 and m.clock.nanosec == 0]
         omega, stray = _by_interval(rec, "rachis/twist_applied", applied, at)
         if stray is not None:
             raise RecordingError(f"{path}: rachis/twist_applied logged at {_t(stray)} does not follow the "
@@ -357,7 +360,8 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         reached = _by_interval(rec, "joint_states", applied, at)[0]
         for k, (ns, m) in enumerate(applied):
             t_end = seconds(sim.get(ns, ns))
-            if t_end < solver.t:  # the node was reset
+            restarted = bisect.bisect_left(starts, at[k]) > bisect.bisect_left(starts, at[k - 1]) if k else False
+            if restarted or t_end < solver.t:  # the node was reset (older recordings: its time went back)
                 solver = Solver(scene, turning=turning)
             a, w = m.accel.linear, m.accel.angular
             set_omega = omega.get(k)

@@ -1,0 +1,144 @@
+"""The node's inputs, clock and parameters, driven in this process (its handlers called as the executor would call
+them, its clock set as /clock would set it), and its parameter errors from its own process."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.time import Time  # noqa: E402
+from std_srvs.srv import Trigger  # noqa: E402
+
+from grapefmu.recording import messages as msgs  # noqa: E402
+from grapefmu.recording.replay import check, read_recording  # noqa: E402
+from grapefmu.recording.stamps import to_ns  # noqa: E402
+from grapefmu.recording.typestore import header, msg, serialize  # noqa: E402
+
+from .test_ros_node import ENV, ros  # noqa: E402,F401
+
+
+def node(**parameters):
+    from grapefmu_ros.node import SimulatorNode
+    return SimulatorNode(parameter_overrides=[Parameter(k, value=v) for k, v in parameters.items()])
+
+
+def pose(n, t: float, z: float) -> None:
+    n.on_pose(serialize(msg("geometry_msgs/msg/PoseStamped", header=header(to_ns(t), "world"),
+                            pose={"position": {"x": 0.0, "y": 0.0, "z": z},
+                                  "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}})))
+
+
+def accel(n, t: float, ax: float) -> None:
+    n.on_accel(serialize(msgs.accel(to_ns(t), (ax, 0.0, 0.0, 0.0, 0.0, 0.0))[1]))
+
+
+def test_a_rejected_pose_leaves_no_trace_in_the_motion_the_node_derives(ros):
+    """A pose glitch (2 mm for one frame, above max_accel once differentiated) is rejected; the node must then go on
+    as a node that never received it: the glitch used to stay in the second difference and the low-pass filter, so
+    the next pose was rejected too and a gripper at rest was held at 7.3 m/s² two frames later. A repeated stamp,
+    rejected, used to get the next valid pose rejected as well."""
+    glitched, clean, repeated = node(mode="lockstep", max_accel=10.0), node(mode="lockstep", max_accel=10.0), \
+        node(mode="lockstep")
+    try:
+        for t, z in [(0.0, 0.0), (0.01, 0.0), (0.02, 0.0), (0.03, 0.002), (0.04, 0.0), (0.05, 0.0), (0.06, 0.0)]:
+            pose(glitched, t, z)
+            if t != 0.03:
+                pose(clean, t, z)
+        assert glitched.rejected == 1 and clean.rejected == 0
+        assert glitched.solver.t == clean.solver.t == 0.06
+        assert glitched.accel == clean.accel == (0.0,) * 6
+        np.testing.assert_array_equal(glitched.solver.angles, clean.solver.angles)
+        for t in (0.0, 0.01, 0.02, 0.02, 0.03, 0.04):
+            pose(repeated, t, 0.0)
+        assert repeated.rejected == 1 and repeated.solver.t == 0.04
+    finally:
+        for n in (glitched, clean, repeated):
+            n.close()
+            n.destroy_node()
+
+
+def test_replay_restarts_at_a_lockstep_reset_whose_next_stamps_run_on(ros, tmp_path):
+    """After a reset the node starts again at t = 0; inputs stamped after the time reached before it (0.5 s after
+    0.2 s) integrate from 0. `replay --check` spotted a reset only where the time went back, and failed such a
+    recording (0.39 rad). A reset is now in the file (sim_time 0): the replay matches it exactly."""
+    rec = tmp_path / "reset.mcap"
+    n = node(mode="lockstep", record=str(rec))
+    try:
+        for t, ax in [(0.0, 0.0), (0.1, 5.0), (0.2, 0.0)]:
+            accel(n, t, ax)
+        n.on_reset(None, Trigger.Response())
+        for t, ax in [(0.5, -3.0), (0.6, 0.0)]:
+            accel(n, t, ax)
+        assert n.solver.t == 0.6
+    finally:
+        n.close()
+        n.destroy_node()
+    result = check(rec)
+    assert result.ok and result.max_deviation == 0.0 and result.compared == 4  # the intervals ending 0.1 … 0.6 s
+
+
+def test_a_real_time_factor_changed_while_running_goes_on_from_where_the_run_is(ros):
+    """At 100× from 1×, the next tick integrated every wall second since the start at 100× (80 s in one step); back
+    at 0.01× the run froze until the clock caught up with it."""
+    n = node(mode="realtime")
+    try:
+        time.sleep(0.2)
+        n.on_tick()
+        t1 = n.solver.t
+        n.set_parameters([Parameter("real_time_factor", value=100.0)])
+        n.on_tick()
+        assert n.solver.t - t1 < 0.5  # a few ms of wall time at 100×, not 0.2 s
+        time.sleep(0.1)
+        n.on_tick()
+        assert 5.0 < n.solver.t - t1 < 30.0  # about 0.1 s at 100×
+        n.set_parameters([Parameter("real_time_factor", value=0.01)])
+        t2 = n.solver.t
+        time.sleep(0.3)
+        n.on_tick()
+        assert t2 < n.solver.t < t2 + 5.0  # on, slowly (the time since the last tick counts at 100×)
+    finally:
+        n.close()
+        n.destroy_node()
+
+
+def test_real_time_under_use_sim_time_runs_on_the_clock_topic(ros, tmp_path):
+    """With use_sim_time the node's clock is /clock: before the first message it reads 0 and the run waits; then it
+    follows that clock, not the computer's, and stamps the newest state with the clock's time (it used to take its
+    origin from the clock at start, 0, and run on the wall clock: stamped 2.1 s where /clock read 1001 s)."""
+    rec = tmp_path / "sim_time.mcap"
+    n = node(mode="realtime", use_sim_time=True, record=str(rec))
+    clock = n.get_clock()
+    try:
+        time.sleep(0.05)
+        n.on_tick()
+        assert n.solver.t == 0.0  # no /clock yet
+        clock.set_ros_time_override(Time(seconds=1000.0))
+        n.on_tick()
+        assert n.solver.t == 0.0
+        clock.set_ros_time_override(Time(seconds=1000.25))
+        time.sleep(0.05)  # wall time passes: it does not count
+        n.on_tick()
+        assert n.solver.t == 0.25
+    finally:
+        n.close()
+        n.destroy_node()
+    states = read_recording(rec).topics["joint_states"]
+    assert states[-1][0] == to_ns(1000.25) and states[-1][1].header.stamp.sec == 1000
+
+
+@pytest.mark.parametrize("value, words", [("rate_hz:=500", "parameter rate_hz"), ("rate_hz:=0.0", "from 1 to 10000"),
+                                          ("record:={tmp}", "parameter record: cannot write")])
+def test_a_bad_parameter_is_one_line_naming_it(tmp_path, value, words):
+    """An integer for a floating-point parameter, a value outside its range or a recording path that is a directory:
+    one line on stderr and exit 2, as a missing scene (they were tracebacks, exit 1)."""
+    r = subprocess.run([sys.executable, "-m", "grapefmu_ros", "--ros-args", "-p", value.format(tmp=tmp_path)],
+                       env=ENV, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert words in r.stderr and "Traceback" not in r.stderr
+    assert [line for line in r.stderr.splitlines() if line.startswith("grapefmu_ros: error:")]
