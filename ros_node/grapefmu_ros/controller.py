@@ -71,14 +71,13 @@ class HarvestController(Node):
 
     def on_tension(self, m):
         self.latest["tension"] = (_t(m.header.stamp), max(m.tension) if len(m.tension) else 0.0)
-        self.peak_tension = max(self.peak_tension, self.latest["tension"][1])
         self.try_command()
 
     def on_summary(self, m):
-        """The node's summary: simulated time and the largest contact force right now."""
-        f = m.max_contact_force
-        self.latest["force"] = (m.time, f)
-        self.peak_force = max(self.peak_force, f)
+        """The node's summary: simulated time, the largest contact force right now, and the run's peaks (the node's
+        booked peaks, refined between samples: the samples' largest would read up to 2 % low)."""
+        self.latest["force"] = (m.time, m.max_contact_force)
+        self.peak_force, self.peak_tension = m.peak_contact_force, m.peak_pedicel_tension
         self.try_command()
 
     def on_clock(self, m):
