@@ -76,11 +76,11 @@ from {pythonfmu} import Fmi{fmi}Slave  # noqa: E402
 try:
     from grapefmu_fmu.fmi{fmi} import GrapeFmi{fmi}Slave
 except ImportError:  # say what this Python lacks of the FMU's requirements, and how to install them
-    from grapefmu_fmu.report import missing_requirements, refuse_function
+    from grapefmu_fmu.report import binaries, missing_requirements, refuse
     _MISSING = missing_requirements(_RESOURCES)
     if not _MISSING:
         raise
-    refuse_function(_RESOURCES, {cls!r})(3, _MISSING.encode())
+    refuse(binaries(_RESOURCES, {cls!r}), 3, _MISSING.encode())
     raise ImportError(_MISSING) from None
 
 
@@ -173,7 +173,7 @@ def _warm_up(scene: Path) -> None:
     core = FmuCore(scene)
     core.initialize()
     core.step(0.0, 1e-3)
-    core.set_state(core.state_from_bytes(core.state_to_bytes(core.get_state())))
+    core.set_state(core.state_from_bytes(core.state_to_bytes(core.get_state("step"))))
     # what advance calls again when more impacts end within one step than its list holds (a long communication
     # step of a busy scene): loaded now, so that it is bundled and a host never compiles mid-run
     entry(session.resume, core.solver._session, 0.0, 1)
@@ -294,7 +294,7 @@ def _fmi2_units(root: ET.Element, scene, outputs: str) -> None:
     defs = ET.Element("UnitDefinitions")
     for u in used:
         el = ET.SubElement(defs, "Unit", {"name": u})
-        if BASE_UNITS.get(u) is not None:
+        if BASE_UNITS[u] is not None:  # every unit is listed (None: exponents not whole); a new one fails here
             ET.SubElement(el, "BaseUnit", {k: str(e) for k, e in BASE_UNITS[u].items()})
     children = list(root)
     pos = next(i for i, c in enumerate(children) if c.tag == "CoSimulation") + 1

@@ -3,19 +3,27 @@
 No method pythonfmu calls may raise: pythonfmu turns an exception into fmiFatal and drops the Python
 slave, so the host's next call would crash. Every refusal instead goes to the FMU's binary (shim.c)
 through `grapefmu_refuse(status, message)`, which logs the message and makes the current FMI call
-return that status; the slave's values and state stay as they were."""
+return that status; the slave's values and state stay as they were. The binary is the one forwarding the
+current call (report.in_call): the same FMU extracted twice in one process shares this module's classes."""
 from __future__ import annotations
 
 import functools
+import ctypes
+import math
 from pathlib import Path
 
 from grapefmu import GrapefmuError, __version__
+from grapefmu.model.bounds import bound
+from grapefmu.model.model import SolverSettings
 from grapefmu.solver.warmup import notice
 
 from .core import FmuCore
-from .report import stderr_refuse, refuse_function
+from .report import binaries, in_call, refuse
 
 OK, WARNING, DISCARD, ERROR, FATAL = range(5)  # fmi2Status and fmi3Status share these codes
+#: s: the largest start time's magnitude, a scene's longest run (solver.t_end): beyond it the time's resolution
+#: is too coarse for event location (at 1e300 s no step moves the time at all)
+MAX_START = bound(SolverSettings, "t_end").hi
 
 
 def kinds(causality, variability, initial) -> dict[tuple[str, bool], dict]:
@@ -46,7 +54,8 @@ class GrapeSlaveMixin:
     KINDS: dict            # per FMI version: kinds(...)
     EXPERIMENT: type       # per FMI version: its DefaultExperiment
     UNITS = False          # whether the version's variables carry a unit
-    _refuse_fn = staticmethod(stderr_refuse)
+    #: the binaries of every instance made in this process (of any extraction): report.in_call picks the one in a call
+    _binaries: list = []
 
     def __init_subclass__(cls, **kw):
         super().__init_subclass__(**kw)
@@ -57,7 +66,8 @@ class GrapeSlaveMixin:
     # --- set-up -----------------------------------------------------------------------------------
     def _setup(self, kwargs) -> None:
         resources = Path(kwargs.get("resources") or ".")
-        type(self)._refuse_fn = refuse_function(resources, type(self).__name__)
+        GrapeSlaveMixin._binaries += [b for b in binaries(resources, type(self).__name__)
+                                      if b not in GrapeSlaveMixin._binaries]
         self.core = FmuCore(resources / self.scene_file)
         self.description = (f"grapefmu {__version__}: berries on hinged twigs that swing and collide under "
                             f"base excitation; scene '{self.core.scene.name}'")
@@ -67,7 +77,7 @@ class GrapeSlaveMixin:
         sv = self.core.scene.solver
         self.default_experiment = self.EXPERIMENT(start_time=0.0, stop_time=sv.t_end, step_size=sv.output_interval,
                                                   tolerance=sv.rtol)
-        self.phase = "instantiated"  # -> "initialization" -> "step"
+        self.phase = "instantiated"  # -> "initialization" -> "step" (core.PHASES)
 
     @functools.cached_property
     def _getters(self) -> dict:
@@ -107,7 +117,18 @@ class GrapeSlaveMixin:
 
     @classmethod
     def _refuse(cls, message: str, status: int = ERROR) -> None:
-        cls._refuse_fn(status, message.encode("utf-8", "replace"))
+        refuse(GrapeSlaveMixin._binaries, status, message.encode("utf-8", "replace"))
+
+    def _start(self, start_time) -> bool:
+        """Take the host's start time (setupExperiment, or FMI 3's enterInitializationMode through the binary);
+        refused (False) unless finite and within ±MAX_START s."""
+        t = float(start_time or 0.0)
+        if not (math.isfinite(t) and abs(t) <= MAX_START):
+            self._refuse(f"startTime {start_time!r} s: expected a finite time within ±{MAX_START:g} s; refused, the "
+                         f"start stays {self.start_time!r} s")
+            return False
+        self.start_time = t
+        return True
 
     # --- variable access --------------------------------------------------------------------------
     def _variable(self, vr, kind, setting: bool):
@@ -168,6 +189,10 @@ class GrapeSlaveMixin:
 
     # --- modes and steps --------------------------------------------------------------------------
     def enter_initialization_mode(self):
+        if self.FMI == 3:  # pythonfmu3 passes FMI 3's startTime to nobody: the binary kept it
+            given, t = in_call(GrapeSlaveMixin._binaries, "grapefmu_start_time", [], ctypes.c_double)
+            if given and not self._start(t):
+                return
         self.phase = "initialization"
 
     def exit_initialization_mode(self):
@@ -191,7 +216,7 @@ class GrapeSlaveMixin:
 
     # --- FMU state --------------------------------------------------------------------------------
     def _get_fmu_state(self):
-        return self.core.get_state()
+        return self.core.get_state(self.phase)
 
     def _set_fmu_state(self, state):
         if isinstance(state, Refusal):
@@ -199,6 +224,7 @@ class GrapeSlaveMixin:
             return
         try:
             self.core.set_state(state)
+            self.phase = state["phase"]
             self._bounds_changed()
         except GrapefmuError as e:
             self._refuse(f"setFMUState refused, the FMU keeps its state: {e}")

@@ -8,9 +8,11 @@ angular acceleration, held over the step, and its angular velocity, set at the s
 from __future__ import annotations
 
 import copy
+import functools
 import io
 import math
 import operator
+import re
 import tomllib
 from pathlib import Path
 
@@ -19,7 +21,8 @@ import numpy as np
 from grapefmu import GrapefmuError, Solver
 from grapefmu.errors import SceneError, StateError
 from grapefmu.model.contact import LAWS, Law
-from grapefmu.model.model import off_axis
+from grapefmu.model.bounds import bound
+from grapefmu.model.model import SolverSettings, off_axis
 from grapefmu.physics.excitation import ACCEL_COMPONENTS, accel
 from grapefmu.results.catalogue import CHANNELS
 from grapefmu.scenefile import parse_scene, scene_from_dict
@@ -45,6 +48,10 @@ INPUT_BOUNDS = {name: kind[1] for name, kind in INPUT_KIND.items()}
 #: the angular inputs per world axis x, y, z: (angular acceleration, angular velocity)
 ANGULAR_INPUTS = tuple(zip(ACCEL_INPUTS[3:], OMEGA_INPUTS))
 DISCARD, ERROR = 2, 3  # FMI 2 and 3 status codes
+#: the FMI phases an FMU state can be taken in (common.py): before, during and after initialization
+PHASES = ("instantiated", "initialization", "step")
+#: the parameters of the scene's [contact] law
+CONTACT_PARAMETERS = ("contact_law", "contact_stiffness", "contact_damping", "restitution")
 #: solver steps one communication step may take: beyond this the step is refused (Discard) in bounded time
 STEP_BUDGET = 100_000
 
@@ -120,9 +127,33 @@ class FmuCore:
                     "gravity": m.gravity, "rtol": sc.solver.rtol})
         return val
 
-    def scene_from_parameters(self):
-        """The scene the parameter values describe, checked by the same validator as a TOML file."""
-        v = self.values
+    def scene_from_parameters(self, values: dict | None = None):
+        """The scene the parameter values (this FMU's, or `values`) describe, checked by the same validator as a TOML
+        file; an error names the FMU's variable (mass_left), not the scene file's key (berries[0].mass)."""
+        v = self.values if values is None else values
+        try:
+            return self._scene_of(v)
+        except SceneError as e:
+            name = self._variable_of(e.key)
+            if name is None:
+                raise
+            raise GrapefmuError(f"{name} = {v[name]!r}: {str(e)[len(e.key) + 2:]}") from None
+
+    def _variable_of(self, key: str) -> str | None:
+        """The FMU variable a scene-file key is set from, if any (berries[0].mass -> mass_left)."""
+        m = re.fullmatch(r"berries\[(\d+)\]\.(\w+)(?:\[(\d)\])?", key)
+        if m:
+            b = self.model.berries[int(m[1])]
+            field = {"angle": "initial_angle", "angular_velocity": "initial_angular_velocity"}.get(m[2], m[2])
+            name = f"{field}_{b.name}" + (f"_{('swing', 'tilt')[int(m[3] or 0)]}" if b.spherical else "")
+        else:
+            name = {"contact.stiffness": "contact_stiffness", "contact.damping": "contact_damping",
+                    "contact.restitution": "restitution", "contact.law": "contact_law",
+                    "coupling.stiffness": "coupling_stiffness", "coupling.damping": "coupling_damping",
+                    "gravity": "gravity", "solver.rtol": "rtol"}.get(key)
+        return name if name in self.values else None
+
+    def _scene_of(self, v: dict):
         doc = copy.deepcopy(self.doc)
         # the inputs drive the rachis; the parameters give its initial orientation
         doc["excitation"] = {"kind": "none", "orientation": [v[name] for name in ORIENTATION]}
@@ -137,7 +168,14 @@ class FmuCore:
                 b[key] = v[f"{key}_{n}"]
             b["angle"] = v[f"initial_angle_{n}"]
             b["angular_velocity"] = v[f"initial_angular_velocity_{n}"]
-        if "contact" in doc:
+        if "contact" not in doc:  # no contact pairs: the contact parameters act on nothing, so they keep their start
+            start = self._start_values()
+            changed = [k for k in CONTACT_PARAMETERS if v[k] != start[k]]
+            if changed:
+                raise GrapefmuError(f"{changed[0]} = {v[changed[0]]!r}: this scene has no [contact] table, so no "
+                                    f"contact pairs for {', '.join(CONTACT_PARAMETERS)} to act on; leave them at "
+                                    "their start values")
+        else:
             code = v["contact_law"]
             if not (isinstance(code, int) and 0 <= code < len(LAWS)):
                 raise GrapefmuError(f"contact_law: expected 0, 1 or 2, got {code!r}")
@@ -163,7 +201,9 @@ class FmuCore:
             doc.pop("coupling", None)
         doc["gravity"] = v["gravity"]
         doc.setdefault("solver", {})["rtol"] = v["rtol"]
-        doc["solver"]["atol"] = min(doc["solver"].get("atol", 1e-10), v["rtol"] * 1e-2) if v["rtol"] > 0 else 1e-10
+        atol = bound(SolverSettings, "atol")  # rtol·1e-2, kept inside atol's bound (rtol's least, 1e-14, would not be)
+        doc["solver"]["atol"] = max(min(doc["solver"].get("atol", 1e-10), v["rtol"] * 1e-2), 10.0 * atol.lo) \
+            if v["rtol"] > 0 else 1e-10
         doc["solver"]["method"] = "event"
         try:
             return scene_from_dict(doc, self.base_dir, name=self.scene.name)
@@ -252,7 +292,7 @@ class FmuCore:
             return ERROR, self.error or "doStep before exitInitializationMode"
         if not (math.isfinite(dt) and dt > 0):
             return ERROR, f"communication step: expected a finite step > 0 s, got {dt!r}"
-        if abs(t - self.solver.t) > 1e-9 * max(1.0, abs(t)):
+        if not (math.isfinite(t) and abs(t - self.solver.t) <= 1e-9 * max(1.0, abs(t))):
             return ERROR, f"currentCommunicationPoint {t!r} s does not continue from the FMU's time {self.solver.t!r} s"
         held, omega = self._held(self.values), self._omega(self.values)
         if self.plane_normal is not None and (held[3] or held[4] or held[5] or omega[0] or omega[1] or omega[2]):
@@ -294,9 +334,15 @@ class FmuCore:
         catalogue channel at a time on one snapshot, so a master that reads a few pays for a few."""
         if name in self._fresh:
             return self._fresh[name]
-        if self.solver is None:
-            return self.values[name]
         channel, targets = self._channel_of[name]
+        if self.solver is None:  # Initialization Mode: the state the parameters set so far give (FMI's InitialUnknowns)
+            probe = self._initial_solver()
+            if probe is None:
+                return self.values[name]
+            v = np.asarray(channel.value(probe.snapshot()))[0].tolist()
+            for target, k, cast in targets:
+                self.values[target] = cast(v[k] if type(v) is list else v)
+            return self.values[name]
         v = self._views.get(channel.name)
         if v is None:
             if self._snap is None:
@@ -307,13 +353,29 @@ class FmuCore:
             self._fresh[target] = self.values[target] = cast(v[k] if type(v) is list else v)
         return self.values[name]
 
+    def _initial_solver(self) -> Solver | None:
+        """A solver at the start state of the parameters as they are now (None while the validator refuses them),
+        made again only when a parameter changes: what the outputs read before initialization ends."""
+        key = tuple(self.values[k] for k in self._parameters)
+        if getattr(self, "_probe_key", None) != key:
+            try:
+                self._probe = Solver(self.scene_from_parameters(), t_start=self.start_time, turning=True)
+            except GrapefmuError:
+                self._probe = None
+            self._probe_key = key
+        return self._probe
+
     # --- FMU state --------------------------------------------------------------------------------
-    def get_state(self) -> dict:
+    def get_state(self, phase: str) -> dict:
+        """The whole FMU: values, solver state, error and the FMI phase (`phase`: PHASES) it was taken in."""
         return {"values": dict(self.values), "solver": self.solver.get_state() if self.solver else None,
-                "error": self.error}
+                "error": self.error, "phase": phase}
 
     def set_state(self, state: dict) -> None:
-        """Restore a state from get_state (or state_from_bytes); anything else is a StateError and changes nothing."""
+        """Restore a state from get_state (or state_from_bytes); anything else is a StateError and changes nothing.
+        A state taken after initialization carries its solver: its parameters must give a scene the solver state
+        belongs to (its fingerprint), whatever this instance's parameters are now (another instance's state
+        brings its own yaw or initial angles; one whose parameters were altered is refused)."""
         values = state["values"]
         if set(values) != set(self.values):
             raise StateError(f"FMU state: variables {sorted(set(values) ^ set(self.values))[:5]} do not match this FMU's")
@@ -321,14 +383,24 @@ class FmuCore:
             problem = self.value_problem(name, x) if type(x) is type(self.values[name]) else f"{name}: wrong type"
             if problem:
                 raise StateError(f"FMU state: {problem}")
-        solver = self.solver
+        if state.get("phase") not in PHASES or (state["solver"] is not None) != (state["phase"] == "step"):
+            raise StateError(f"FMU state: phase {state.get('phase')!r} does not fit its solver state")
+        solver = None
         if state["solver"] is not None:
-            solver = solver or Solver(self.scene_from_parameters(), max_steps=STEP_BUDGET, turning=True)
+            same = self.solver is not None and all(values[k] == self.values[k] for k in self._parameters)
+            solver = self.solver if same else Solver(self.scene_from_parameters(values), max_steps=STEP_BUDGET,
+                                                     turning=True)
             solver.set_state(state["solver"])  # refuses before anything changes
-        self._use(solver if state["solver"] is not None else None)
+        self._use(solver)
+        if solver is not None:
+            self.scene = solver.scene
         self.values.clear()  # in place: the FMI variables' getters and setters hold this dict
         self.values.update(values)
         self.error = state["error"]
+
+    @functools.cached_property
+    def _parameters(self) -> list[str]:
+        return [v.name for v in self.vars if v.causality == "parameter"]
 
     @staticmethod
     def state_to_bytes(state: dict) -> bytes:
@@ -341,6 +413,7 @@ class FmuCore:
         arrays["value_data"] = np.array([float(state["values"][k]) for k in names])
         arrays["value_kind"] = np.array([type(state["values"][k]).__name__ for k in names])
         arrays["error"] = np.array(state["error"] or "")
+        arrays["phase"] = np.array(state["phase"])
         buf = io.BytesIO()
         np.savez(buf, **arrays)
         return buf.getvalue()
@@ -353,11 +426,15 @@ class FmuCore:
             z = np.load(io.BytesIO(bytes(data)), allow_pickle=False)
             cast = {"bool": bool, "int": int, "float": float}
             values = {str(n): cast[str(k)](x) for n, x, k in zip(z["value_names"], z["value_data"], z["value_kind"])}
+            bad = [str(n) for n, x, k in zip(z["value_names"], z["value_data"], z["value_kind"])
+                   if str(k) != "float" and x != cast[str(k)](x)]  # an integer or a flag stored as 2.7
+            if bad:
+                raise StateError(f"serialized FMU state: {bad[0]} is not a whole number")
             solver = None
             if any(k.startswith("solver.") for k in z.files):
                 solver = solver_state.unflatten({k[len("solver."):]: z[k].copy() for k in z.files
                                                  if k.startswith("solver.")})
-            return {"values": values, "solver": solver, "error": str(z["error"]) or None}
+            return {"values": values, "solver": solver, "error": str(z["error"]) or None, "phase": str(z["phase"])}
         except StateError:
             raise
         except Exception as e:  # noqa: BLE001 - a corrupted buffer fails in many ways inside numpy's reader

@@ -12,6 +12,7 @@ class GrapeFmi2Slave(GrapeSlaveMixin, Fmi2Slave):
     TYPES = {"real": Real, "integer": Integer, "boolean": Boolean}
     ACCESS = {"real": Real, "integer": Integer, "boolean": Boolean, "string": String}
     EXPERIMENT = DefaultExperiment
+    FMI = 2
     KINDS = kinds(Fmi2Causality, Fmi2Variability, Fmi2Initial)
 
     def __init__(self, **kwargs):
@@ -21,7 +22,7 @@ class GrapeFmi2Slave(GrapeSlaveMixin, Fmi2Slave):
             self._register(var)
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        self.start_time = float(start_time or 0.0)  # the stop time is enforced by the FMU's binary
+        self._start(start_time)  # the stop time is enforced by the FMU's binary
 
     def do_step(self, current_time, step_size):
         self._step(current_time, step_size)

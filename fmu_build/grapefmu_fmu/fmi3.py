@@ -27,6 +27,7 @@ class GrapeFmi3Slave(GrapeSlaveMixin, Fmi3Slave):
     ACCESS = {"float64": Float64, "int32": Int32, "int64": Int64, "uint64": UInt64, "boolean": Boolean,
               "string": String}
     EXPERIMENT = DefaultExperiment
+    FMI = 3
     KINDS = kinds(Fmi3Causality, Fmi3Variability, Fmi3Initial)
     UNITS = True
 
@@ -34,7 +35,7 @@ class GrapeFmi3Slave(GrapeSlaveMixin, Fmi3Slave):
         super().__init__(**kwargs)
         self._setup(kwargs)
         units = {v.unit for v in self.core.vars if v.unit not in ("", "1")} | {"s"}
-        self.register_units([Unit(u, **BASE_UNITS[u]) if BASE_UNITS.get(u) is not None else _UnitWithoutBase(u)
+        self.register_units([Unit(u, **BASE_UNITS[u]) if BASE_UNITS[u] is not None else _UnitWithoutBase(u)
                              for u in sorted(units)])
         self.register_variable(Float64("time", causality=Fmi3Causality.independent,
                                        variability=Fmi3Variability.continuous, unit="s",
@@ -42,8 +43,8 @@ class GrapeFmi3Slave(GrapeSlaveMixin, Fmi3Slave):
         for var in self.core.vars:
             self._register(var)
 
-    def setup_experiment(self, start_time):
-        self.start_time = float(start_time or 0.0)
+    def setup_experiment(self, start_time):  # not called by pythonfmu3: enter_initialization_mode asks the binary
+        self._start(start_time)
 
     def do_step(self, current_time, step_size):
         self._step(current_time, step_size)

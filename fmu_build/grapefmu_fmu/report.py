@@ -17,30 +17,41 @@ def stderr_refuse(status: int, message: bytes) -> None:
     sys.stderr.write(f"grapefmu FMU: {message.decode()}\n")
 
 
-def refuse_function(resources, identifier: str):
-    """grapefmu_refuse(status, message) of this FMU's own binary (shim.c): logs the message through the host
-    and makes the current FMI call return that status. The binary is looked up in the process at each call
-    and released again: holding it open would keep it loaded after the host unloads the FMU, and pythonfmu's
-    binary behind it must start afresh when the host loads the FMU again."""
-    libs = sorted((Path(resources).parent / "binaries").glob(f"*/{identifier}.so"))
+def binaries(resources, identifier: str) -> list[Path]:
+    """This FMU's binaries (one per platform) in the extraction whose resources are `resources`."""
+    return sorted((Path(resources).parent / "binaries").glob(f"*/{identifier}.so"))
 
-    def refuse(status: int, message: bytes) -> None:
-        for lib in libs:
-            try:
-                binary = ctypes.CDLL(str(lib), mode=os.RTLD_NOLOAD | os.RTLD_NOW)
-            except OSError:
-                continue  # not the one this process loaded
-            try:
-                binary.grapefmu_refuse.argtypes = [ctypes.c_int, ctypes.c_char_p]
-                binary.grapefmu_refuse(status, message)
-                return
-            except AttributeError:
-                pass
-            finally:
-                _ctypes.dlclose(binary._handle)
+
+def in_call(libs, name: str, argtypes: list, restype, *args):
+    """Call `name` (shim.c) in the one binary of `libs` that is forwarding an FMI call on this thread (grapefmu_in_call):
+    (True, its result), or (False, None) when none is (a call from outside an FMI call, or pythonfmu's binary alone).
+    The same FMU extracted twice in one process is two binaries, and its Python module and classes are shared by
+    both (pythonfmu imports the slave module once): only the binary in the call can make the call's status.
+    Each binary is looked up in the process and released again: holding it open would keep it loaded after the
+    host unloads the FMU, and pythonfmu's binary behind it must start afresh when the host loads the FMU again."""
+    for lib in libs:
+        try:
+            binary = ctypes.CDLL(str(lib), mode=os.RTLD_NOLOAD | os.RTLD_NOW)
+        except OSError:
+            continue  # not loaded in this process
+        try:
+            if not binary.grapefmu_in_call():
+                continue
+            f = getattr(binary, name)
+            f.argtypes, f.restype = argtypes, restype
+            return True, f(*args)
+        except AttributeError:
+            continue
+        finally:
+            _ctypes.dlclose(binary._handle)
+    return False, None
+
+
+def refuse(libs, status: int, message: bytes) -> None:
+    """grapefmu_refuse(status, message) of the binary in the call: logs the message through the host and makes the
+    current FMI call return that status (or worse); on stderr when no binary is in a call."""
+    if not in_call(libs, "grapefmu_refuse", [ctypes.c_int, ctypes.c_char_p], None, status, message)[0]:
         stderr_refuse(status, message)
-
-    return refuse
 
 
 def missing_requirements(resources) -> str | None:

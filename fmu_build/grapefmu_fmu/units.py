@@ -6,6 +6,7 @@ BASE_UNITS: dict[str, dict[str, int] | None] = {
     "rad": {"rad": 1},
     "rad/s": {"rad": 1, "s": -1},
     "m/s2": {"m": 1, "s": -2},
+    "rad/s2": {"rad": 1, "s": -2},
     "N": {"kg": 1, "m": 1, "s": -2},
     "J": {"kg": 1, "m": 2, "s": -2},
     "N/m": {"kg": 1, "s": -2},

@@ -52,6 +52,15 @@ __attribute__((visibility("default"))) void grapefmu_refuse(int status, const ch
     if (status > pending) pending = status;
 }
 
+/* Called by the Python side: whether this binary is forwarding an FMI call on this thread (the same FMU extracted
+   twice in one process is two binaries sharing one Python module: the one in the call takes the refusal). */
+__attribute__((visibility("default"))) int grapefmu_in_call(void) { return current != NULL; }
+
+static __thread double start_given;  /* the startTime of the current fmi3EnterInitializationMode call */
+
+/* Called by the Python side during fmi3EnterInitializationMode: pythonfmu3 passes the start time on to nobody. */
+__attribute__((visibility("default"))) double grapefmu_start_time(void) { return start_given; }
+
 static int settle(int status)
 {
     int p = pending;
@@ -359,6 +368,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     Instance* I = (Instance*)instance;
     if (!I) return fmi3Error;
     set_stop(I, stopTimeDefined, stopTime);
+    start_given = startTime;
     return (fmi3Status)settle(INNER(fmi3EnterInitializationMode)(I->inner, toleranceDefined, tolerance, startTime,
                                                                  stopTimeDefined, stopTime));
 }

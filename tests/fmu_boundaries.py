@@ -1,0 +1,216 @@
+"""Driver for tests/test_fmu_boundaries.py: the FMU at the edges of what a host may do, through fmpy's low-level
+calls, every status and logged message kept. Run in a process of its own:
+python -m tests.fmu_boundaries FMI2.fmu FMI3.fmu NO_CONTACT_FMI2.fmu"""
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import sys
+from ctypes import byref
+
+import numpy as np
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import (FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
+                       fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, free)
+from fmpy.fmi3 import FMU3Slave
+from fmpy.logging import addLoggerProxy
+
+LOG: list[str] = []
+_logger = fmi2CallbackLoggerTYPE(lambda env, name, status, cat, msg: LOG.append(msg.decode(errors="replace")))
+
+
+def _callbacks():
+    cb = fmi2CallbackFunctions()
+    cb.logger = _logger
+    cb.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    cb.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    addLoggerProxy(byref(cb))
+    return cb
+
+
+def call(fn, *args):
+    """(status: 0 OK or the FMI error status, messages logged during the call, result)."""
+    n = len(LOG)
+    try:
+        return 0, LOG[n:], fn(*args)
+    except FMICallException as e:
+        return e.status, LOG[n:], None
+
+
+class Fmu2:
+    """An FMI 2 instance in a fresh extraction of `path` (as a host that extracts per instance does)."""
+
+    def __init__(self, path, name, params=None, start=0.0, init=True):
+        md = read_model_description(path)
+        self.vr = {v.name: v.valueReference for v in md.modelVariables}
+        self.type = {v.name: v.type for v in md.modelVariables}
+        self.cb = _callbacks()
+        self.f = FMU2Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+                           instanceName=name)
+        self.f.instantiate(loggingOn=True, callbacks=self.cb)
+        self.t = start
+        if init:
+            self.f.setupExperiment(startTime=start)
+            self.f.enterInitializationMode()
+            for k, v in (params or {}).items():
+                self.set(k, v)
+            self.f.exitInitializationMode()
+
+    def set(self, name, value):
+        fn = {"Integer": self.f.setInteger, "Boolean": self.f.setBoolean}.get(self.type[name], self.f.setReal)
+        return call(fn, [self.vr[name]], [value])
+
+    def get(self, name):
+        fn = {"Integer": self.f.getInteger, "Boolean": self.f.getBoolean}.get(self.type[name], self.f.getReal)
+        return fn([self.vr[name]])[0]
+
+    def step(self, dt, t=None):
+        r = call(self.f.doStep, self.t if t is None else t, dt)
+        if r[0] == 0:
+            self.t += dt
+        return r
+
+    def state(self) -> bytes:
+        return bytes(self.f.serializeFMUstate(self.f.getFMUstate()))
+
+    def restore(self, blob: bytes):
+        st = call(self.f.deSerializeFMUstate, blob)
+        return st if st[0] else call(self.f.setFMUstate, st[2])
+
+
+def crafted(blob: bytes, name: str, value: float) -> bytes:
+    """A serialized state with one stored value changed."""
+    z = dict(np.load(io.BytesIO(blob), allow_pickle=False))
+    data = z["value_data"].copy()
+    data[list(z["value_names"]).index(name)] = value
+    z["value_data"] = data
+    out = io.BytesIO()
+    np.savez(out, **z)
+    return out.getvalue()
+
+
+def fmi2(path, no_contact) -> dict:
+    r = {}
+    # the same FMU extracted twice in one process: each instance's refusals are still its own call's status
+    a = Fmu2(path, "a")
+    b = Fmu2(path, "b")
+    r["twice: a zero step"] = call(a.f.doStep, 0.0, 0.0)[0]
+    r["twice: a NaN input"] = a.set("base_ax", math.nan)[0]
+    r["twice: b zero step"] = call(b.f.doStep, 0.0, 0.0)[0]
+    # start times and communication points the FMU cannot run from
+    for label, start in (("NaN", math.nan), ("huge", 1e300)):
+        c = Fmu2(path, f"start {label}", init=False)
+        r[f"start {label}"] = call(lambda: c.f.setupExperiment(startTime=start))[0]
+    c = Fmu2(path, "points")
+    r["doStep at NaN"] = call(c.f.doStep, math.nan, 1e-3)[0]
+    r["doStep at -inf"] = call(c.f.doStep, -math.inf, 1e-3)[0]
+    # FMU states: crafted parameters refused; another instance's state brings its parameters
+    a.set("base_ax", 3.0)
+    for _ in range(20):
+        a.step(1e-3)
+    blob = a.state()
+    for label, name, value in (("mass", "mass_left", 0.5), ("restitution", "restitution", -3.0),
+                               ("law 2.7", "contact_law", 2.7)):
+        g = Fmu2(path, f"crafted {label}")
+        st, msgs, _ = g.restore(crafted(blob, name, value))
+        r[f"crafted {label}"] = (st, g.get("mass_left"), g.get("restitution"), g.get("contact_law"))
+    yawed = Fmu2(path, "yawed", {"rachis_yaw": 0.5})
+    plain = Fmu2(path, "plain")
+    for f in (yawed, plain):
+        f.set("base_ax", 2.0)
+    for _ in range(5):
+        yawed.step(1e-3)
+    r["yaw state restored"] = plain.restore(yawed.state())[0]
+    plain.t = yawed.t
+    r["yaw reads"] = plain.get("rachis_yaw")
+    r["yaw steps"] = (yawed.step(0.05)[0], plain.step(0.05)[0])
+    r["yaw same angle"] = yawed.get("angle_left") == plain.get("angle_left")
+    for f in (yawed, plain):  # a turn about the world's y axis: off the yawed rachis' y axis, for both
+        f.set("base_omega_y", 1.0)
+        f.set("base_alpha_y", 100.0)
+    r["yaw turn about world y"] = (yawed.step(0.01)[0], plain.step(0.01)[0])
+    # a state taken in Initialization Mode, restored after stepping: back in Initialization Mode
+    c = Fmu2(path, "init state", init=False)
+    c.f.setupExperiment(startTime=0.0)
+    c.f.enterInitializationMode()
+    c.set("initial_angle_left", -0.3)
+    s0 = c.f.getFMUstate()
+    c.f.exitInitializationMode()
+    for _ in range(10):
+        c.step(1e-3)
+    r["init state restored"] = call(c.f.setFMUstate, s0)[0]
+    r["init state: set parameter"] = c.set("initial_angle_left", 0.1)[0]
+    r["init state: exit"] = call(c.f.exitInitializationMode)[0]
+    c.t = 0.0
+    r["init state: step"] = c.step(1e-3)[0]
+    r["init state: angle"] = c.get("angle_left")
+    # outputs in Initialization Mode: the start state the parameters set so far give, as after initialization
+    c = Fmu2(path, "init outputs", init=False)
+    c.f.setupExperiment(startTime=0.0)
+    c.f.enterInitializationMode()
+    c.set("initial_angle_left", -0.3)
+    during = (c.get("angle_left"), c.get("pedicel_tension_left"))
+    c.set("mass_left", -1.0)  # refused by the validator at exit: the outputs keep what they read
+    refused = (c.get("angle_left"), c.get("pedicel_tension_left"))
+    c.set("mass_left", 0.01)
+    c.set("initial_angle_left", -0.2)
+    again = (c.get("angle_left"), c.get("pedicel_tension_left"))
+    c.f.exitInitializationMode()
+    r["init outputs"] = (during, refused, again, (c.get("angle_left"), c.get("pedicel_tension_left")))
+    # parameters named as the FMU names them; rtol's least value accepted
+    for label, params in (("mass", {"mass_left": -1.0}), ("rtol", {"rtol": 1e-14})):
+        c = Fmu2(path, f"param {label}", init=False)
+        c.f.setupExperiment(startTime=0.0)
+        c.f.enterInitializationMode()
+        for k, v in params.items():
+            c.set(k, v)
+        st, msgs, _ = call(c.f.exitInitializationMode)
+        r[f"param {label}"] = (st, " ".join(msgs))
+    c = Fmu2(no_contact, "no contact", init=False)
+    c.f.setupExperiment(startTime=0.0)
+    c.f.enterInitializationMode()
+    c.set("restitution", 0.5)
+    st, msgs, _ = call(c.f.exitInitializationMode)
+    r["no contact restitution"] = (st, " ".join(msgs))
+    return r
+
+
+def fmi3(path) -> dict:
+    r = {}
+    md = read_model_description(path)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+
+    def make(name, start=0.0):
+        f = FMU3Slave(guid=md.guid, unzipDirectory=extract(path), modelIdentifier=md.coSimulation.modelIdentifier,
+                      instanceName=name)
+        f.instantiate(loggingOn=True, logMessage=lambda env, status, cat, msg: LOG.append(
+            msg.decode(errors="replace") if isinstance(msg, bytes) else str(msg)))
+        st = call(f.enterInitializationMode, None, start)[0]
+        return f, st
+
+    f, _ = make("five", start=5.0)
+    f.exitInitializationMode()
+    r["start 5: time"] = f.getFloat64([vr["time"]])[0]
+    r["start 5: step"] = call(f.doStep, 5.0, 1e-3)[0]
+    r["start 5: time after"] = f.getFloat64([vr["time"]])[0]
+    r["start NaN"] = make("nan", start=math.nan)[1]
+    a, _ = make("a")
+    a.exitInitializationMode()
+    b, _ = make("b")
+    b.exitInitializationMode()
+    r["twice: a zero step"] = call(a.doStep, 0.0, 0.0)[0]
+    return r
+
+
+def main(argv):
+    out = {"fmi2": fmi2(argv[0], argv[2]), "fmi3": fmi3(argv[1])}
+    print("JSON:" + json.dumps(out), flush=True)
+    sys.stdout.flush()
+    os._exit(0)  # docs/reliability.md, known limits: pythonfmu3's FMI 3 binary may abort a Python host at exit
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,94 @@
+"""The FMU at the edges of what a host may do, found by an audit (each case failed on the code before it): the built
+FMUs driven in a process of their own (tests/fmu_boundaries.py)."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("fmpy")
+ROOT = Path(__file__).resolve().parents[1]
+ERROR = 3
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    d = tmp_path_factory.mktemp("fmu")
+    builds = [("d2.fmu", [], 2), ("d3.fmu", [], 3), ("bare2.fmu", ["scenes/paper/test1.toml"], 2)]
+    for name, scene, fmi in builds:
+        subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", *scene, "-o", str(d / name), "--fmi", str(fmi)],
+                       check=True, cwd=ROOT, capture_output=True)
+    r = subprocess.run([sys.executable, "-m", "tests.fmu_boundaries", *(str(d / n) for n, _, _ in builds)], cwd=ROOT,
+                       capture_output=True, text=True, timeout=900)
+    assert "JSON:" in r.stdout, r.stderr[-3000:]
+    return json.loads(r.stdout.split("JSON:", 1)[1])
+
+
+def test_the_same_fmu_extracted_twice_in_one_process_still_refuses(results):
+    """pythonfmu imports the slave module once per process, so two extractions share its classes; the refusal went to
+    the binary of the last instance made, and the earlier instance's refused calls returned OK."""
+    for fmi in ("fmi2", "fmi3"):
+        assert results[fmi]["twice: a zero step"] == ERROR, fmi
+    assert results["fmi2"]["twice: a NaN input"] == ERROR
+    assert results["fmi2"]["twice: b zero step"] == ERROR
+
+
+def test_start_times_and_communication_points_the_fmu_cannot_run_from_are_refused(results):
+    """A NaN or 1e300 s start time was taken (every step then OK, nothing moving); so were doStep at NaN and −∞."""
+    r = results["fmi2"]
+    assert r["start NaN"] == r["start huge"] == ERROR
+    assert r["doStep at NaN"] == r["doStep at -inf"] == ERROR
+    assert results["fmi3"]["start NaN"] == ERROR
+
+
+def test_fmi3_starts_at_the_hosts_start_time(results):
+    """pythonfmu3 hands FMI 3's startTime to nobody: the FMU started at 0 and refused every step of a host at 5 s."""
+    r = results["fmi3"]
+    assert r["start 5: time"] == 5.0 and r["start 5: step"] == 0 and r["start 5: time after"] == 5.001
+
+
+def test_an_fmu_state_brings_its_parameters_or_is_refused(results):
+    """A state whose stored parameters were altered (mass, restitution) is refused, the instance unchanged; one whose
+    integer was stored as 2.7 too. Another instance's real state, taken at another yaw, is restored with that yaw: the
+    restored instance then steps exactly as the one that made it (it used to keep its own yaw and check the inputs
+    against its own plane)."""
+    r = results["fmi2"]
+    for label in ("mass", "restitution", "law 2.7"):
+        status, mass, restitution, law = r[f"crafted {label}"]
+        assert status == ERROR, label
+        assert (mass, restitution, law) == (r["crafted mass"][1], r["crafted mass"][2], r["crafted mass"][3])
+    assert r["yaw state restored"] == 0 and r["yaw reads"] == 0.5
+    assert r["yaw steps"] == [0, 0] and r["yaw same angle"]
+    assert r["yaw turn about world y"] == [ERROR, ERROR]  # off the yawed plane's normal: refused by both alike
+
+
+def test_a_state_taken_in_initialization_mode_restores_initialization_mode(results):
+    """The phase was not in the state: restored after steps, the instance refused both its parameters (fixed) and
+    its steps (not initialized)."""
+    r = results["fmi2"]
+    assert r["init state restored"] == r["init state: set parameter"] == r["init state: exit"] == 0
+    assert r["init state: step"] == 0 and abs(r["init state: angle"] - 0.1) < 0.01
+
+
+def test_outputs_in_initialization_mode_are_the_start_state_of_the_parameters_set_so_far(results):
+    """FMI's InitialUnknowns: a host that reads them to initialize what it connects got 0 rad and 0 N (the start
+    values) for a berry set at -0.3 rad."""
+    during, refused, again, after = results["fmi2"]["init outputs"]
+    assert during[0] == -0.3 and during[1] > 0.0
+    assert refused == during  # parameters the validator refuses: the last outputs stand
+    assert again == after and after[0] == -0.2
+
+
+def test_parameter_errors_name_the_fmu_variable_and_rtol_takes_its_whole_range(results):
+    status, log = results["fmi2"]["param mass"]
+    assert status == ERROR and "mass_left = -1.0: expected a number in (0, 10] kg" in log
+    assert results["fmi2"]["param rtol"][0] == 0  # the derived atol, rtol·1e-2 = 1e-16, was outside atol's range
+
+
+def test_contact_parameters_of_a_scene_without_contact_are_refused(results):
+    """They acted on nothing and were accepted (contact_law 7 read back as 7)."""
+    status, log = results["fmi2"]["no contact restitution"]
+    assert status == ERROR and "no [contact] table" in log and "restitution = 0.5" in log
