@@ -146,6 +146,12 @@ def test_bad_plot_is_refused_before_the_run(tmp_path, plot, words):
     (["cluster", "--seed", "-1", "-o", "c.toml"], "cluster", ["seed"]),
     (["cluster", "--berries", "100000", "-o", "c.toml"], "cluster", ["berries", "[1, 1000]"]),
     (["cluster", "--row", "--pitch", "nan", "-o", "c.toml"], "cluster", ["pitch"]),
+    (["cluster", "--seed", "-1", "-o", "c.toml"], "cluster", ["--seed: expected an integer in [0, 2**63)"]),
+    (["cluster", "--row", "--precompression", "5", "-o", "c.toml"], "cluster",  # was ignored without a word
+     ["--precompression: for a cluster, not with --row"]),
+    (["cluster", "--pitch", "-1", "-o", "c.toml"], "cluster", ["--pitch: only with --row"]),
+    (["cluster", "--hinge-stiffness", "1e-5", "0", "-o", "c.toml"], "cluster",  # named berries[0].rest_angles[1]
+     ["--hinge-stiffness", "cannot hold its twig", "needs at least"]),
     (["sweep", "missing.toml"], "sweep", ["missing.toml"]),
     (["sweep", "latin1.toml"], "sweep", ["latin1.toml", "UTF-8"]),
     (["sweep", "spec.toml", "-o", "afile"], "sweep", ["--output afile", ".parquet"]),
@@ -169,6 +175,8 @@ def test_bad_plot_is_refused_before_the_run(tmp_path, plot, words):
      ["--max-bruise", "samples are needed"]),
     (["risk", DEFAULT, "--fit", "missing.json"], "risk", ["--fit missing.json", "cannot read"]),
     (["risk", DEFAULT, "--range", "contact.stiffness=1:2", "--scales", "2:1"], "risk", ["--scales 2:1"]),
+    (["risk", "still.toml", "--range", "contact.stiffness=1000:2000", "--max-bruise", "0.5", "--samples", "10"], "risk",
+     ["--max-bruise", "pick-and-place"]),  # refused before any run (it was after every plan's runs)
     (["simulate", "--no-such-flag"], "simulate", ["unrecognized arguments"]),
     (["no-such-command"], "", ["invalid choice"]),
 ])
@@ -178,6 +186,10 @@ def test_every_command_refuses_in_one_line(tmp_path, args, command, words):
     (tmp_path / "m.csv").write_text("time_s,angle_left_rad\n" + "".join(f"{k / 100},0.0\n" for k in range(20)))
     (tmp_path / "spec.toml").write_text(f'scene = "{default_scene_path()}"\n[[parameters]]\nkey = "gravity"\n'
                                         'values = [9.81]\n')
+    still = copy.deepcopy(DEFAULT_DOC)
+    still["excitation"] = {"kind": "none"}  # a plan with no moves to scale
+    from grapefmu.scenefile import dumps
+    (tmp_path / "still.toml").write_text(dumps(still))
     r = cli(*args, cwd=tmp_path)
     if command:
         assert_one_line_error(r, command, *words)

@@ -82,6 +82,23 @@ def test_a_contact_parameter_without_a_collision_is_flagged_and_the_rest_still_r
     assert any(w.startswith("contact.stiffness is not identifiable") for w in res.warnings)
     for key in ("berries[*].hinge_damping", "berries[0].hinge_stiffness"):
         assert by[key].identifiable and abs(by[key].value - TRUE[key]) <= 3 * by[key].se, by[key]
+    # "the scene's value kept": in the fitted scene as the scene gave it, not exp(log 2000) = 1999.9999999999998
+    assert res.fitted_doc["contact"]["stiffness"] == start["contact"]["stiffness"] == 2000.0
+
+
+def test_a_twig_key_the_data_say_nothing_about_keeps_each_twigs_own_value():
+    """berries[*].hinge_damping of 1e-5 and 4e-5 on a cluster at rest: no sensitivity, "the scene's value kept",
+    and the fitted scene held their geometric mean, 2e-5, for both."""
+    rest = copy.deepcopy(TRUTH)
+    rest["berries"][0]["angle"] = 0.0
+    rest["berries"][0]["hinge_damping"], rest["berries"][1]["hinge_damping"] = 1e-5, 4e-5
+    cols = camera_data(scene_from_dict(copy.deepcopy(rest), Path.cwd()), rate=100.0, noise=0.0, seed=3)
+    still = Measured(Path("still.csv"), cols["time_s"], ("left", "right"),
+                     np.column_stack([cols["angle_left_rad"], cols["angle_right_rad"]]), None)
+    res = fit(rest, Path.cwd(), parameters(["berries[*].hinge_damping", "contact.stiffness"], rest), [still])
+    by = {e.key: e for e in res.estimates}
+    assert "no sensitivity" in by["berries[*].hinge_damping"].note
+    assert [b["hinge_damping"] for b in res.fitted_doc["berries"]] == [1e-5, 4e-5]
 
 
 def test_a_grazing_impact_leaves_the_contact_law_flagged_by_its_standard_errors():
@@ -201,6 +218,7 @@ def frames(n: int = 20) -> list[list]:
     (lambda r: r[3].__setitem__(0, "nan"), ["time_s", "row 4 (line 5)", "not finite"]),
     (lambda r: r[6].__setitem__(2, "abc"), ["angle_right_rad", "row 7 (line 8)", "'abc' is not a number"]),
     (lambda r: r[0].__setitem__(0, -1.0), ["time_s", "row 1 (line 2)", "starts at or after 0 s"]),
+    (lambda r: r[19].__setitem__(0, 1e8), ["time_s", "row 20 (line 21)", "at most 100000 s"]),  # was out of memory
 ])
 def test_bad_rows_are_errors_naming_column_and_row(tmp_path, change, words):
     rows = frames()
@@ -211,6 +229,15 @@ def test_bad_rows_are_errors_naming_column_and_row(tmp_path, change, words):
     assert "m.csv" in text and "\n" not in text
     for w in words:
         assert w in text, (w, text)
+
+
+def test_a_measured_gripper_acceleration_beyond_the_faces_bound_is_refused(tmp_path):
+    """5e6 m/s² was fitted (exit 0, a residual of 24.5 rad); every face refuses beyond ±1000 m/s²."""
+    rows = [r + [0.0, 0.0] for r in frames()]
+    rows[5][3] = 5e6
+    with pytest.raises(DataError, match=r"base_ax_m_s2 row 6 \(line 7\): 5e\+06 m/s²; at most ±1000 m/s²"):
+        read_measured(csv_file(tmp_path, rows, "time_s,angle_left_rad,angle_right_rad,base_ax_m_s2,base_az_m_s2"),
+                      MODEL)
 
 
 @pytest.mark.parametrize("header, words", [

@@ -172,3 +172,43 @@ def test_an_interrupted_risk_run_keeps_its_finished_samples_and_resumes(plans, t
                           for x in sorted(rows, key=lambda x: x["run_id"])]
     assert strip(table.values()) == strip(whole.rows)
     assert f"plan_fast: P(bruise) = {whole.bruise.text()}" in r.stdout
+
+
+# --- bad plans and bad reports (found by an audit) --------------------------------------------------------------
+
+def test_a_scale_whose_every_run_is_refused_writes_no_nan(plans, tmp_path):
+    """At a time scale of 0.02 every run exceeds the solver's acceleration bound and is refused: P(bruise) is unknown,
+    and risk.json held NaN (not JSON) and risk.md 'nan'. Now null and words, and the refusals are listed."""
+    r = assess(plans[1:], dist(plans[1]), 6, 3, tmp_path, max_bruise=0.5, scales=(0.02, 4.0), tolerance=0.5,
+               workers=0, progress=False)
+    step = next(o for o in r.search.steps if o.scale == 0.02)
+    assert step.bruise.n == 0 and len(step.failed) == 6
+    text = (tmp_path / "risk.json").read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    doc = json.loads(text)
+    assert [s["bruise"]["p"] for s in doc["search"]["steps"] if s["scale"] == 0.02] == [None]
+    md = (tmp_path / "risk.md").read_text()
+    assert "nan" not in md and "unknown: no run finished (0/0)" in md and "0.02: 6 (the first:" in md
+
+
+def test_a_plan_the_scene_validator_refuses_is_one_line_before_any_run(plans, tmp_path):
+    """A plan with a negative mass ran: every run refused, P = nan written (exit 0)."""
+    bad = tmp_path / "bad.toml"
+    bad.write_text(plans[0].read_text().replace("mass = ", "mass = -", 1))
+    r = subprocess.run([sys.executable, "-m", "grapefmu", "risk", str(plans[0]), str(bad), "--range",
+                        "thresholds.bruise_force=1.7:4", "--samples", "3", "--out", str(tmp_path / "out")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "bad.toml: berries[0].mass" in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("change", [lambda d: d["covariance_u"][0].__setitem__(0, "x"),
+                                    lambda d: d["covariance_u"][0].__setitem__(0, [1]),
+                                    lambda d: d["parameters"][0].__setitem__("u", 1e300)])
+def test_a_malformed_fit_report_is_refused_as_not_a_fit_report(tmp_path, change):
+    """An entry of the covariance that is not a number raised a traceback; a u of 1e300 drew infinite values."""
+    doc = json.loads((ROOT / "docs" / "fit_and_risk" / "fit.json").read_text())
+    change(doc)
+    (tmp_path / "fit.json").write_text(json.dumps(doc))
+    with pytest.raises(grapefmu.GrapefmuError, match="not a fit report"):
+        distribution(tomllib.loads((EXAMPLES / "plan_fast.toml").read_text()), tmp_path / "fit.json", [])

@@ -92,6 +92,20 @@ def test_a_run_the_validator_refuses_becomes_an_error_row(folder):
     assert all(r["status"] == "ok" for r in table if r["contact.stiffness"] == 1500.0)
 
 
+def test_a_key_whose_values_mix_kinds_is_written_as_their_json_text(folder):
+    """[false, "auto"] for solver.islands is a legal sweep: both runs finished and then the Parquet writer refused the
+    column (a traceback, and the same crash again on every resume)."""
+    row = folder / "row.toml"
+    row.write_text(row.read_text().replace("[solver]\n", '[solver]\nislands = "auto"\n'))
+    (folder / "mixed.toml").write_text('scene = "row.toml"\nmode = "grid"\n\n[[parameters]]\nkey = "solver.islands"\n'
+                                       'values = [false, "auto"]\n\n[[parameters]]\nkey = "contact.stiffness"\n'
+                                       'values = [1500, 3000.5]\n')
+    table = rows(run_sweep(load_spec(folder / "mixed.toml"), folder / "mixed.parquet", workers=1, progress=False))
+    assert [(r["solver.islands"], r["contact.stiffness"]) for r in table] == \
+        [("false", 1500.0), ("false", 3000.5), ('"auto"', 1500.0), ('"auto"', 3000.5)]
+    assert all(r["status"] == "ok" for r in table)
+
+
 @pytest.mark.parametrize("change, field", [
     (("contact.stiffness", "contact.stifness"), "parameters[0].key"),
     (('mode = "grid"', 'mode = "latin"'), "mode"),

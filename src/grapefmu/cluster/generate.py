@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import SceneError
+from ..model.bounds import bound
+from ..model.model import Berry
 
 DENSITY = 1070.0  # kg/m³, grape berry (docs/parameters.md)
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
@@ -81,6 +83,8 @@ def _check(spec: ClusterSpec) -> None:
         raise SceneError("cluster.tilt", f"expected 0 ≤ low ≤ high < π/2 rad, got {spec.tilt!r}")
 
 
+#: a twig's rest angles (Berry.rest_angles): the bound a rest tilt must stay within
+REST_TILT = bound(Berry, "rest_angles")
 PACKING = 0.2  # berry volume over the cone's volume: a loose cluster that random placement can fill
 
 
@@ -136,6 +140,11 @@ def cluster_scene(spec: ClusterSpec, max_tries: int = 400) -> dict[str, Any]:
         # the twig frame's −y axis points along the twig's heading: (swing, tilt) = (0, tilt) is the pose
         azimuth = heading + math.pi / 2
         rest_tilt = tilt + mass * g * l_twig * math.sin(tilt) / k_h
+        if rest_tilt > REST_TILT.hi:  # the hinge's spring must hold the twig's weight at its tilt: ~1e-5 N·m/rad cannot
+            need = mass * g * l_twig * math.sin(tilt) / (REST_TILT.hi - tilt)
+            raise SceneError("cluster.hinge_stiffness", f"berry {i}'s hinge of {k_h:.3g} N·m/rad cannot hold its twig "
+                             f"at its tilt of {tilt:.3g} rad (a rest angle of {rest_tilt:.4g} rad); it needs at least "
+                             f"{need:.3g} N·m/rad: raise the mean or narrow the spread")
         berries.append({"name": f"b{i:03d}", "kind": "spherical", "mass": mass, "radius": r, "twig_length": l_twig,
                         "hinge": [float(x) for x in hinge], "azimuth": math.remainder(azimuth, 2 * math.pi),
                         "rest_angles": [0.0, rest_tilt], "hinge_stiffness": k_h, "hinge_damping": c_h,

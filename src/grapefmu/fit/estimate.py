@@ -174,7 +174,8 @@ def fit(doc: dict[str, Any], base_dir: Path, params: list[Parameter], series: li
     warnings += _structured(traces, stats["sigma"])
     return FitResult(estimates, corr, stats["cov"], stats["sigma"], len(r), stats["rank"], stats["condition"],
                      sol.nfev, time.perf_counter() - start, warnings,
-                     scene_with(doc, params, theta[:P]), traces)
+                     scene_with(doc, [p for p, z in zip(params, stats["zero"]) if not z], theta[:P][~stats["zero"]]),
+                     traces)  # a parameter the data say nothing about is left as the scene gives it (each twig's own)
 
 
 def _hint(p: Parameter) -> str:

@@ -22,11 +22,15 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
-from ..model.model import Model
+from ..model.bounds import bound
+from ..model.excitation import MAX_ACCEL
+from ..model.model import Model, SolverSettings
 from ..results.catalogue import channel, file_column
 
 #: a step in time longer than this many median frame intervals is reported as a gap
 GAP_FACTOR = 1.5
+#: s: the latest frame time, a scene's longest run (a time of 1e8 s asked for gigabytes of samples)
+MAX_TIME = bound(SolverSettings, "t_end").hi
 #: at most this many rows are named in one message (then "and N more")
 NAMED_ROWS = 5
 
@@ -121,6 +125,10 @@ def read_measured(path: str | Path, model: Model) -> Measured:
     if t[0] < 0:
         raise DataError(f"{path}: {tcol} {_rows([0], lines)}: {t[0]:g} s; time starts at or after 0 s, the scene's "
                         "clock (subtract the camera's offset)")
+    late = np.flatnonzero(t > MAX_TIME).tolist()
+    if late:
+        raise DataError(f"{path}: {tcol} {_rows(late, lines)}: {t[late[0]]:g} s; at most {MAX_TIME:g} s, a scene's "
+                        "longest run (solver.t_end)")
     back = np.flatnonzero(np.diff(t) <= 0).tolist()
     if back:
         r = back[0] + 1
@@ -161,6 +169,10 @@ def read_measured(path: str | Path, model: Model) -> Measured:
             if bad:
                 raise DataError(f"{path}: {col} {_rows(bad, lines)}: missing or not finite; a measured gripper "
                                 "motion needs every frame (or leave both acceleration columns out)")
+            beyond = np.flatnonzero(np.abs(accel[:, k]) > MAX_ACCEL).tolist()
+            if beyond:
+                raise DataError(f"{path}: {col} {_rows(beyond, lines)}: {accel[beyond[0], k]:g} m/s²; at most "
+                                f"±{MAX_ACCEL:g} m/s², the bound every face uses")
     return Measured(path, t, tuple(dofs), angles, accel, tuple(warnings))
 
 

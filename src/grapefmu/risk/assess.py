@@ -8,7 +8,7 @@ from ..errors import GrapefmuError
 from ..fit.params import parameter
 from . import report
 from .draws import Distribution
-from .montecarlo import Outcome, check_samples, plan_doc, run_plan
+from .montecarlo import Outcome, check_samples, plan_doc, run_plan, time_scaled
 from .search import Search, fastest
 
 #: the files assess writes into its directory, beside one Parquet table per plan and per searched scale
@@ -50,6 +50,8 @@ def assess(plans: list[str | Path], dist: Distribution, samples: int, seed: int,
     if not 0 <= seed < 2**63:
         raise GrapefmuError(f"--seed: expected an integer in [0, 2^63), got {seed}")
     check_plans(plans, dist)
+    if max_bruise is not None:  # the search scales the first plan's moves: refused now, not after every plan has run
+        time_scaled(plan_doc(plans[0])[0], 2.0)
     out_dir = Path(out_dir)
     outcomes = []
     for p in plans:

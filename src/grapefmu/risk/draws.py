@@ -131,10 +131,12 @@ def _read_fit(path: Path) -> dict[str, Any]:
         doc = json.loads(path.read_text(encoding="utf-8"))
         params = doc["parameters"]
         cov = doc["covariance_u"]
+        number = lambda x: isinstance(x, (int, float)) and not isinstance(x, bool)  # noqa: E731
         ok = isinstance(params, list) and all(isinstance(p, dict) and isinstance(p.get("key"), str) and
-                                              isinstance(p.get("u"), (int, float)) for p in params)
+                                              number(p.get("u")) and abs(p["u"]) < 700.0
+                                              for p in params)  # u: a log or a logit; exp(u) overflows past 709
         ok = ok and isinstance(cov, list) and len(cov) == len(params) and all(
-            isinstance(r, list) and len(r) == len(params) for r in cov)
+            isinstance(r, list) and len(r) == len(params) and all(x is None or number(x) for x in r) for r in cov)
     except OSError as e:
         raise GrapefmuError(f"--fit {path}: cannot read: {e.strerror or e}") from None
     except (ValueError, KeyError, TypeError, UnicodeDecodeError):

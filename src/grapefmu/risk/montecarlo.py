@@ -49,6 +49,7 @@ class Probability:
 
     @property
     def p(self) -> float:
+        """k/n; NaN when no run finished (plots leave it out; the text and JSON say so instead of a number)."""
         return self.k / self.n if self.n else float("nan")
 
     @property
@@ -56,6 +57,8 @@ class Probability:
         return clopper_pearson(self.k, self.n)
 
     def text(self) -> str:
+        if not self.n:
+            return "unknown: no run finished (0/0)"
         lo, hi = self.interval
         return f"{self.p:.3f} [{lo:.3f}, {hi:.3f}] ({self.k}/{self.n})"
 
@@ -79,7 +82,7 @@ class Outcome:
     def as_json(self) -> dict[str, Any]:
         def pr(x: Probability) -> dict[str, Any]:
             lo, hi = x.interval
-            return {"p": x.p, "low": lo, "high": hi, "count": x.k, "runs": x.n}
+            return {"p": x.p if x.n else None, "low": lo, "high": hi, "count": x.k, "runs": x.n}
         return {"plan": self.plan, "scale": self.scale, "duration_s": self.duration, "table": str(self.table),
                 "bruise": pr(self.bruise), "detach": pr(self.detach),
                 "berries": {b: {"bruise": pr(self.berry_bruise[b]), "detach": pr(self.berry_detach[b])}

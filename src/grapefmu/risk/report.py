@@ -46,6 +46,10 @@ def markdown(outcomes: list[Outcome], dist: Distribution, samples: int, seed: in
         for o in sorted(search.steps, key=lambda o: o.scale):
             ok = o.bruise.n > 0 and o.bruise.interval[1] <= search.bound
             out.append(f"| {o.scale:.4g} | {o.duration:.4g} | {o.bruise.text()} | {'yes' if ok else 'no'} |")
+        failed = [o for o in sorted(search.steps, key=lambda o: o.scale) if o.failed]
+        if failed:  # a scale too fast for the solver's bounds: every run refused, the probability unknown
+            out += ["", "Runs that did not finish (left out of the counts), by time scale: "
+                    + "; ".join(f"{o.scale:.4g}: {len(o.failed)} (the first: {o.failed[0]})" for o in failed) + "."]
         out += ["", search.note + "."]
     return "\n".join(out) + "\n"
 

@@ -195,11 +195,25 @@ def _write_parquet(rows: list[dict], spec: SweepSpec, output: Path) -> None:
 
     keys = [p.key for p in spec.parameters]
     cols = ["run_id", *keys, *RESULT_COLUMNS]
-    table = pa.Table.from_pylist([{c: r.get(c) for c in cols} for r in rows])
+    records = [{c: r.get(c) for c in cols} for r in rows]
+    for key in keys:  # one Arrow type per column: a key whose values mix kinds is written as their JSON text
+        kinds = {_kind(r[key]) for r in records if r[key] is not None}
+        if kinds == {"int", "float"}:
+            for r in records:
+                r[key] = None if r[key] is None else float(r[key])
+        elif len(kinds) > 1:
+            for r in records:
+                r[key] = None if r[key] is None else json.dumps(r[key])
+    table = pa.Table.from_pylist(records)
     table = table.replace_schema_metadata({"grapefmu_sweep_fingerprint": spec.fingerprint,
                                            "grapefmu_sweep_spec": spec.text})
     with atomic_path(output) as tmp:
         pq.write_table(table, tmp)
+
+
+def _kind(x) -> str:
+    """A value's kind for its Parquet column (a bool is not an int here)."""
+    return "bool" if isinstance(x, bool) else type(x).__name__
 
 
 def _fingerprint_of(path: Path) -> str | None:
