@@ -175,6 +175,8 @@ def test_bad_plot_is_refused_before_the_run(tmp_path, plot, words):
      ["--max-bruise", "samples are needed"]),
     (["risk", DEFAULT, "--fit", "missing.json"], "risk", ["--fit missing.json", "cannot read"]),
     (["risk", DEFAULT, "--range", "contact.stiffness=1:2", "--scales", "2:1"], "risk", ["--scales 2:1"]),
+    (["risk", DEFAULT, "--range", "berries[*].hinge_damping=1e-5:5e-5", "--range", "berries[0].hinge_damping=1e-5:2e-5"],
+     "risk", ["--range", "set the same value"]),  # both were drawn, the last silently winning
     (["risk", "still.toml", "--range", "contact.stiffness=1000:2000", "--max-bruise", "0.5", "--samples", "10"], "risk",
      ["--max-bruise", "pick-and-place"]),  # refused before any run (it was after every plan's runs)
     (["simulate", "--no-such-flag"], "simulate", ["unrecognized arguments"]),

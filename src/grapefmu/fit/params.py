@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import SceneError
-from ..sweep.spec import apply, slots, values_at
+from ..sweep.spec import apply, same_value, values_at
 
 #: the last part of a key (its table, its name) -> (transform, unit); the table's list may be indexed. The unit of
 #: the contact law's coefficients depends on the law (UNITS).
@@ -106,18 +106,8 @@ def parameters(keys: list[str], doc: dict[str, Any], where: str = "--param") -> 
     if not keys:
         raise SceneError(where, f"name at least one parameter to estimate; allowed: {allowed()}")
     out = [parameter(k, doc, where) for k in keys]
-    marked = copy.deepcopy(doc)
-    for n, p in enumerate(out):
-        for container, name in slots(marked, p.key, where):
-            if isinstance(container[name], _Mark):
-                raise SceneError(where, f"{p.key!r} and {out[container[name].n].key!r} set the same value")
-            container[name] = _Mark(n)
+    same_value(doc, [p.key for p in out], where)
     return out
-
-
-class _Mark:
-    def __init__(self, n: int):
-        self.n = n
 
 
 def scene_with(doc: dict[str, Any], params: list[Parameter], u: np.ndarray) -> dict[str, Any]:

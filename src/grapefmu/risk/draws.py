@@ -20,6 +20,7 @@ import numpy as np
 
 from ..errors import GrapefmuError
 from ..fit.params import Parameter, parameter
+from ..sweep.spec import same_value
 
 
 @dataclass(frozen=True)
@@ -101,6 +102,7 @@ def distribution(doc: dict[str, Any], fit: str | Path | None = None, ranges: lis
     rs = [parse_range(t, doc) for t in ranges]
     if len({r.parameter.key for r in rs}) != len(rs):
         raise GrapefmuError("--range: a key is given twice")
+    same_value(doc, [r.parameter.key for r in rs], "--range")
     if fit is None:
         if not rs:
             raise GrapefmuError("--fit, --range: neither given; the parameters' distribution comes from --fit "
@@ -114,6 +116,7 @@ def distribution(doc: dict[str, Any], fit: str | Path | None = None, ranges: lis
             raise GrapefmuError(f"--fit {fit}: {p['key']} was not identifiable in that fit ({p.get('note', '')}); "
                                 f"give its range instead: --range {p['key']}=LOW:HIGH")
     params = tuple(parameter(p["key"], doc, f"--fit {fit}", drawn=True) for _, p in rows)
+    same_value(doc, [p.key for p in params] + [r.parameter.key for r in rs], f"--fit {fit}, --range")
     for par, (_, row) in zip(params, rows):
         if "unit" in row and row["unit"] != par.unit:  # a stiffness fitted for one contact law, drawn for another
             raise GrapefmuError(f"--fit {fit}: {par.key} was fitted in {row['unit']}; this plan's contact law takes "

@@ -103,9 +103,26 @@ def load_spec(path: str | Path) -> SweepSpec:
     if not isinstance(raw, list) or not raw:
         raise SceneError("parameters", "expected at least one [[parameters]] table")
     params = tuple(_parameter(f"parameters[{n}]", p, mode, base) for n, p in enumerate(raw))
-    samples = v.integer("samples", doc.get("samples", 100), 1, MAX_RUNS) if mode == "monte-carlo" else 0
+    samples = v.integer("samples", doc.get("samples", 100), 1, MAX_RUNS)  # checked in any mode: a grid ignores it
+    samples = samples if mode == "monte-carlo" else 0
     seed = v.integer("seed", doc.get("seed", 1), 0, 2**63 - 1)
     return checked(SweepSpec(base, scene_path.parent, mode, params, samples, seed, text + "\n---\n" + scene_text))
+
+
+def same_value(doc: dict, keys: list[str], where: str = "parameters") -> None:
+    """Refuse keys of which two reach the same value of doc (berries[*].mass and berries[0].mass): the run would set it
+    twice, the last one silently winning."""
+    marked = copy.deepcopy(doc)
+    for n, key in enumerate(keys):
+        for container, name in slots(marked, key, where):
+            if isinstance(container[name], _Mark):
+                raise SceneError(where, f"{key!r} and {keys[container[name].n]!r} set the same value")
+            container[name] = _Mark(n)
+
+
+class _Mark:
+    def __init__(self, n: int):
+        self.n = n
 
 
 def checked(spec: SweepSpec) -> SweepSpec:
@@ -114,6 +131,7 @@ def checked(spec: SweepSpec) -> SweepSpec:
     params = spec.parameters
     if len({p.key for p in params}) != len(params):
         raise SceneError("parameters", "a key is swept twice")
+    same_value(spec.base, [p.key for p in params])
     if spec.mode == "grid" and np.prod([len(p.values) for p in params], dtype=float) > MAX_RUNS:
         raise SceneError("parameters", f"the grid has more than {MAX_RUNS} runs")
     if spec.mode == "list":
