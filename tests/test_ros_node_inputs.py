@@ -130,6 +130,18 @@ def test_real_time_under_use_sim_time_runs_on_the_clock_topic(ros, tmp_path):
         n.destroy_node()
     states = read_recording(rec).topics["joint_states"]
     assert states[-1][0] == to_ns(1000.25) and states[-1][1].header.stamp.sec == 1000
+    # a factor set while the run waits for /clock is taken as it is (it made the first tick integrate clock × factor)
+    n = node(mode="realtime", use_sim_time=True)
+    try:
+        n.get_clock().set_ros_time_override(Time(seconds=1000.0))
+        n.set_parameters([Parameter("real_time_factor", value=2.0)])
+        n.on_tick()
+        n.get_clock().set_ros_time_override(Time(seconds=1000.25))
+        n.on_tick()
+        assert n.solver.t == 0.5
+    finally:
+        n.close()
+        n.destroy_node()
 
 
 @pytest.mark.parametrize("value, words", [("rate_hz:=500", "parameter rate_hz"), ("rate_hz:=0.0", "from 1 to 10000"),

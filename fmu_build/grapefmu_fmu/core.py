@@ -336,10 +336,10 @@ class FmuCore:
             return self._fresh[name]
         channel, targets = self._channel_of[name]
         if self.solver is None:  # Initialization Mode: the state the parameters set so far give (FMI's InitialUnknowns)
-            probe = self._initial_solver()
-            if probe is None:
+            snap = self._initial_snapshot()
+            if snap is None:
                 return self.values[name]
-            v = np.asarray(channel.value(probe.snapshot()))[0].tolist()
+            v = np.asarray(channel.value(snap))[0].tolist()
             for target, k, cast in targets:
                 self.values[target] = cast(v[k] if type(v) is list else v)
             return self.values[name]
@@ -353,14 +353,14 @@ class FmuCore:
             self._fresh[target] = self.values[target] = cast(v[k] if type(v) is list else v)
         return self.values[name]
 
-    def _initial_solver(self) -> Solver | None:
-        """A solver at the start state of the parameters as they are now (None while the validator refuses them),
-        made again only when a parameter changes: what the outputs read before initialization ends."""
+    def _initial_snapshot(self):
+        """The start state of the parameters as they are now (None while they cannot make one), taken again only when
+        a parameter changes: what the outputs read before initialization ends. Nothing may raise from a getter."""
         key = tuple(self.values[k] for k in self._parameters)
         if getattr(self, "_probe_key", None) != key:
             try:
-                self._probe = Solver(self.scene_from_parameters(), t_start=self.start_time, turning=True)
-            except GrapefmuError:
+                self._probe = Solver(self.scene_from_parameters(), t_start=self.start_time, turning=True).snapshot()
+            except Exception:  # noqa: BLE001 - parameters the validator refuses, or anything else: the last values stand
                 self._probe = None
             self._probe_key = key
         return self._probe

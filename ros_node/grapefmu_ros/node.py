@@ -169,12 +169,16 @@ class SimulatorNode(Node):
         return seconds(to_ns(self.sim0 + seconds(clock_ns - self.clock0) * self.real_time_factor))
 
     def _on_parameters_set(self, params) -> None:
-        """real_time_factor: the run goes on from where the old factor has brought it, at the new one."""
+        """real_time_factor: the run goes on from where the old factor has brought it, at the new one (a run still
+        waiting for /clock just takes it); use_sim_time: the clock changes, so the run restarts from where it is."""
         for p in params:
-            if p.name == "real_time_factor" and self.mode == "realtime":
+            if p.name == "real_time_factor":
                 now = self.get_clock().now().nanoseconds
-                self.sim0, self.clock0 = self._sim_target(now), now
+                if self.mode == "realtime" and self.clock0 != 0:
+                    self.sim0, self.clock0 = self._sim_target(now), now
                 self.real_time_factor = p.value
+            elif p.name == "use_sim_time" and self.mode == "realtime":
+                self._restart_clock()
 
     def _reset_sim(self):
         self.solver = Solver(self.scene, turning=True)  # whatever the scene does, inputs may turn the rachis

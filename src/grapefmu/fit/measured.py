@@ -15,7 +15,6 @@ row (rows count from 1 below the header; the line adds the header and comments):
 from __future__ import annotations
 
 import csv
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,7 +23,7 @@ import numpy as np
 from ..errors import DataError
 from ..model.bounds import bound
 from ..model.excitation import MAX_ACCEL
-from ..model.model import Model, SolverSettings
+from ..model.model import ANGLE, Model, SolverSettings
 from ..results.catalogue import channel, file_column
 
 #: a step in time longer than this many median frame intervals is reported as a gap
@@ -146,7 +145,7 @@ def read_measured(path: str | Path, model: Model) -> Measured:
     angles = np.column_stack([numbers(angle_column(d)) for d in dofs])
     for k, d in enumerate(dofs):
         col = angle_column(d)
-        beyond = np.flatnonzero(np.abs(angles[:, k]) > math.pi).tolist()
+        beyond = np.flatnonzero(np.abs(angles[:, k]) > ANGLE.hi).tolist()
         if beyond:
             r = beyond[0]
             raise DataError(f"{path}: {col} {_rows(beyond, lines)}: {angles[r, k]:g} is beyond ±π rad; angles are "

@@ -70,9 +70,13 @@ class ContactLaw:
                 return (name, f"expected {b.allowed} for the {self.kind} law, got {x!r}")
         if self.restitution is not None and not RESTITUTION.holds(self.restitution):
             return ("restitution", f"expected {RESTITUTION.allowed}, got {self.restitution!r}")
-        if not self.clamp and self.law != Law.KELVIN_VOIGT:
-            return ("allow_tension", "only the kelvin-voigt law has a pulling branch to allow")
-        return None
+        why = refuses_tension(self.kind, self.clamp)
+        return ("allow_tension", why) if why else None
+
+
+def refuses_tension(kind: str, clamp: bool) -> str | None:
+    """Why a law cannot pull (clamp False), or None."""
+    return None if clamp or kind == "kelvin-voigt" else "only the kelvin-voigt law has a pulling branch to allow"
 
 
 #: each law's coefficients: stiffness k N/m or K N/m^1.5, damping c N·s/m or the dimensionless χ (hertz: none)

@@ -349,10 +349,12 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         applied, at = rec.topics.get("rachis/accel_applied", []), rec.positions.get("rachis/accel_applied", [])
         # each applied interval ends at a simulated time: `sim_time`, logged at the same stamp (its header is
         # the ROS clock), or the stamp itself in recordings made before the node stamped with its clock
-        sim = {ns: to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec)) for ns, m in rec.topics.get("sim_time", [])}
-        # the node's (re)starts: a sim_time of 0, which no interval ends at (recordings before it had none)
-        starts = [pos for pos, (_, m) in zip(rec.positions.get("sim_time", []), rec.topics.get("sim_time", []))
-                  if m.clock.sec == 0 and m.clock.nanosec == 0]
+        # the node's (re)starts: a sim_time of 0, which no interval ends at (recordings before it had none); its stamp
+        # may be an interval's (a reset before the clock moved), so it is left out of the intervals' ends
+        start = [m.clock.sec == 0 and m.clock.nanosec == 0 for _, m in rec.topics.get("sim_time", [])]
+        starts = [pos for pos, s in zip(rec.positions.get("sim_time", []), start) if s]
+        sim = {ns: to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec))
+               for (ns, m), s in zip(rec.topics.get("sim_time", []), start) if not s}
         omega, stray = _by_interval(rec, "rachis/twist_applied", applied, at)
         if stray is not None:
             raise RecordingError(f"{path}: rachis/twist_applied logged at {_t(stray)} does not follow the "

@@ -1,11 +1,13 @@
 """`assess`: every plan's Monte Carlo over the same draws, the optional duration search, and the report files."""
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import GrapefmuError
+from ..errors import GrapefmuError, SceneError
 from ..fit.params import parameter
+from ..scenefile import scene_from_dict
 from . import report
 from .draws import Distribution
 from .montecarlo import Outcome, check_samples, plan_doc, run_plan, time_scaled
@@ -26,18 +28,27 @@ class Risk:
 
 
 def check_plans(plans: list[str | Path], dist: Distribution) -> None:
-    """Every plan is a scene holding every key the distribution sets; no two plans share a file name (their
-    tables are named after them)."""
+    """Every plan is a scene the validator takes, holding every key the distribution sets in the unit it was drawn
+    in (a stiffness fitted in N/m drawn for a Hunt–Crossley plan ran in the wrong unit; a plan with a negative mass
+    had every run refused and P = nan written); no two plans share a file name (their tables are named after
+    them)."""
     if not plans:
         raise GrapefmuError("plans: none given; name at least one plan (a scene TOML)")
     stems = [Path(p).stem for p in plans]
     if len(set(stems)) != len(stems):
         raise GrapefmuError(f"{', '.join(map(str, plans))}: two plans have the same file name; their tables are "
                             "named after them")
+    drawn = {par.key: par.unit for par in dist.normal} | {r.parameter.key: r.parameter.unit for r in dist.ranges}
     for p in plans:
         doc, _ = plan_doc(p)
-        for key in dist.keys:
-            parameter(key, doc, str(p), drawn=True)
+        try:
+            scene_from_dict(copy.deepcopy(doc), Path(p).parent)
+        except SceneError as e:
+            raise GrapefmuError(f"{p}: {e}") from None
+        for key, unit in drawn.items():
+            par = parameter(key, doc, str(p), drawn=True)
+            if par.unit != unit:
+                raise GrapefmuError(f"{p}: {key} is drawn in {unit}; this plan's contact law takes {par.unit}")
 
 
 def assess(plans: list[str | Path], dist: Distribution, samples: int, seed: int, out_dir: str | Path, *,

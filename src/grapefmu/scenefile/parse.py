@@ -16,7 +16,7 @@ from ..model import excitation as exc
 from . import validate as v
 from ..model.bounds import Bound, bound
 from ..model.contact import (EFFECTIVE_MODULUS, LAW_BOUNDS, LAWS, RESTITUTION, ContactLaw, Law, hertz_stiffness,
-                             hunt_crossley_chi, kelvin_voigt_damping)
+                             hunt_crossley_chi, kelvin_voigt_damping, refuses_tension)
 from ..model.model import (ANGLE, ANGULAR_VELOCITY, CONTACT_LOCATIONS, METHODS, OBSTACLE_KINDS, Berry, ContactPair,
                            Coupling, Model, Obstacle, Scene, SolverSettings, Thresholds)
 from .budget import check_state
@@ -249,8 +249,9 @@ def _law_of(key: str, raw: dict) -> Callable[[float, float, float], ContactLaw]:
     pair adds (effective mass kg, radii m: a restitution or an effective modulus depends on them)."""
     law = v.choice(f"{key}.law", raw.get("law", "kelvin-voigt"), LAWS)
     clamp = not v.boolean(f"{key}.allow_tension", raw.get("allow_tension", False))
-    if not clamp and law != "kelvin-voigt":
-        raise SceneError(f"{key}.allow_tension", "only the kelvin-voigt law has a pulling branch to allow")
+    why = refuses_tension(law, clamp)
+    if why:
+        raise SceneError(f"{key}.allow_tension", why)
     if "damping" in raw and "restitution" in raw:
         raise SceneError(f"{key}.restitution", "give damping or restitution, not both")
     if law != "kelvin-voigt" and "stiffness" in raw and "effective_modulus" in raw:
@@ -353,15 +354,15 @@ def _solver(raw: Any) -> SolverSettings:
     v.no_unknown_keys(key, raw, SOLVER_KEYS)
     d = SolverSettings()
 
-    def setting(name: str, b: Bound | None = None) -> float:
-        return v.within(f"{key}.{name}", raw.get(name, getattr(d, name)), b or bound(SolverSettings, name))
+    def setting(name: str) -> float:
+        return v.within(f"{key}.{name}", raw.get(name, getattr(d, name)), bound(SolverSettings, name))
 
     t_end = setting("t_end")
     zeno = bound(SolverSettings, "zeno_max_events")
     s = SolverSettings(
         method=v.choice(f"{key}.method", raw.get("method", d.method), METHODS),
         rtol=setting("rtol"), atol=setting("atol"), t_end=t_end,
-        output_interval=setting("output_interval", bound(SolverSettings, "output_interval")._replace(hi=t_end)),
+        output_interval=setting("output_interval"),  # at most t_end: s.refusal()
         fixed_step=setting("fixed_step"), zeno_window=setting("zeno_window"),
         zeno_max_events=v.integer(f"{key}.zeno_max_events", raw.get("zeno_max_events", d.zeno_max_events),
                                   int(zeno.lo), int(zeno.hi)),
