@@ -51,3 +51,13 @@ def scene(doc: dict):
 @pytest.fixture
 def collision_scene():
     return scene(dual(solver={"t_end": 2.0}))
+
+
+def build_fmu(out: Path, fmi: int, scene: str | None = None) -> Path:
+    """`grapefmu build-fmu` in a process of its own (a build and a simulation must not share one), from the repository
+    root: the default scene, or `scene` (a path from the root)."""
+    import subprocess
+    import sys
+    subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", *([scene] if scene else []), "-o", str(out),
+                    "--fmi", str(fmi)], check=True, cwd=Path(__file__).resolve().parents[1], capture_output=True)
+    return out

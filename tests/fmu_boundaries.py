@@ -112,6 +112,8 @@ def fmi2(path, no_contact) -> dict:
     for _ in range(20):
         a.step(1e-3)
     blob = a.state()
+    fresh = Fmu2(path, "fresh")
+    r["fresh"] = (fresh.get("mass_left"), fresh.get("restitution"), fresh.get("contact_law"))
     for label, name, value in (("mass", "mass_left", 0.5), ("restitution", "restitution", -3.0),
                                ("law 2.7", "contact_law", 2.7)):
         g = Fmu2(path, f"crafted {label}")

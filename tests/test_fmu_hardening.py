@@ -18,6 +18,8 @@ from hypothesis import strategies as st
 from grapefmu import Solver
 from grapefmu.scenefile import load_scene
 
+from .conftest import build_fmu
+
 pytest.importorskip("fmpy")
 ROOT = Path(__file__).resolve().parents[1]
 STOP = 1.0
@@ -27,8 +29,7 @@ STOP = 1.0
 def fmus(tmp_path_factory):
     d = tmp_path_factory.mktemp("fmu")
     for fmi in (2, 3):
-        subprocess.run([sys.executable, "-m", "grapefmu", "build-fmu", "-o", str(d / f"d{fmi}.fmu"), "--fmi", str(fmi)],
-                       check=True, cwd=ROOT, capture_output=True)
+        build_fmu(d / f"d{fmi}.fmu", fmi)
     return d
 
 
