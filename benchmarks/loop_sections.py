@@ -47,7 +47,7 @@ PROBES = [
     ("sampled = far < 0.0", "quiet"),
     ("cnt.near_pairs_sum += B.count[0]", "keep_valid"),
     ("t_commit = t_new if not event", "find_event"),
-    ("sample_step(t0, h, theta_e,", "record_grid"),
+    ("ended = sample_step(t0, h, theta_e,", "record_grid"),
     ("# --- commit", "sample_step"),
     ("if Z.drifted.shape[0] > 0:", "commit"),
     ("cnt.steps += 1", "drift"),
@@ -89,7 +89,7 @@ def main() -> None:
     rate = 0.0
     for r in range(a.repeats + 1):
         s = Solver(sc, rtol=a.rtol, atol=a.rtol / 100)
-        R = ses.recording(s._session, int(t_end / dt) + 2, dt)
+        R = ses.recording(s._session, int(t_end / dt) + 2, dt, t_end)
         Z = loop.buffers(s.M, s.layout.size, False)
         T = np.zeros(len(PROBES), dtype=np.int64)
         c0, w0 = rdtsc_py(), time.perf_counter()

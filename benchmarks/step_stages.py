@@ -78,7 +78,7 @@ def t_sample_step(n, M, X, TB, S, config, Z, h, kind):
     for _ in range(n):
         sample_step(P.t[0], h, 1.0, P.y, S.integrator.dense, M, X, S.input[0], P.contacts, B.near, B.count[0],
                     Bk.totals, Bk.pair, Bk.peak_tension, config[0], Z.W, Z.work, Z.fbuf, Z.pwbuf, Z.cls, Z.tension,
-                    Z.pushing, Z.samples, kind == 1, kind == 2)
+                    Z.pushing, Z.samples, kind == 1, kind == 2, Z.reach)
 
 
 STAGES = [("one RHS", t_rhs, False), ("kinematics (stage 1 alone)", t_kinematics, False),

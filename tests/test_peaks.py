@@ -2,11 +2,19 @@
 step's samples (solver/sampling.refine_tensions), so it converges as rtol tightens. The reference is independent of
 the booking pass: the tension the run's observation computes (physics/observe.py, every pair evaluated) at every sample
 of a fine output grid of a run at rtol 1e-12."""
+import numba as nb
 import numpy as np
 import pytest
 
 import grapefmu
+from grapefmu.bench.scale import scene as scale_scene
 from grapefmu.bench.scenes import bench_scenes, build
+from grapefmu.physics import observe
+from grapefmu.physics.excitation import base_accel
+from grapefmu.physics.kinematics import kinematics
+from grapefmu.solver.broadphase import samples_for
+from grapefmu.solver.sampling import tensions_bounded
+from grapefmu.solver.solver import Solver
 
 
 @pytest.mark.parametrize("name, t_end", [("free swing", 0.6), ("paper collision", 0.35)])
@@ -50,3 +58,58 @@ def test_running_peaks_never_fall_and_hold_every_sample(method):
                       ("peak_contact_force_n", run.contact_force.max(axis=1, initial=0.0))):
         assert np.all(np.diff(col[name]) >= 0.0), name
         assert np.all(col[name] >= np.maximum.accumulate(now)), name
+
+
+@nb.njit
+def _bounded(t0, h, y0, q, M, X, inp, contacts, near, nnear, kin, peak, reach):
+    kinematics(y0, M, kin)
+    return tensions_bounded(t0, h, y0, q, M, X, inp, contacts, near, nnear, kin, peak, reach)
+
+
+def _coupled_chirp():
+    from .conftest import dual, scene
+    return scene(dual(angles=(0.0, 0.2), coupling={"stiffness": 0.5, "damping": 0.002},
+                      excitation={"kind": "sweep", "amplitude": [6.0, 3.0], "f_start": 2.0, "f_stop": 12.0},
+                      solver={"t_end": 0.6}))
+
+
+@pytest.mark.parametrize("name", ["paper collision", "pick and place", "coupled chirp", "cluster"])
+def test_the_tension_bound_is_never_below_the_tension_on_the_step(name):
+    """A step whose tensions cannot pass their peaks is not sampled (sampling.tensions_bounded). On every step of a run,
+    the bound is tested against the tension the observation computes (physics/observe.py) at 400 points of the step's
+    dense output: told a peak just below a berry's largest tension there, it must say the step can pass it. On the
+    paper collision it must also spare most steps, or it saves nothing."""
+    sc = {"coupled chirp": _coupled_chirp, "cluster": lambda: scale_scene("cluster", 4, 1e-6, 0.6)}.get(
+        name, lambda: build(bench_scenes()[name]))()
+    s = Solver(sc, rtol=1e-6, atol=1e-8)
+    S, M = s.state, s.M
+    kin = samples_for(M)[0]
+    reach = np.zeros((M.berry.shape[0], 3))
+    theta = np.r_[np.arange(400) / 400, 1.0 - 1e-9]
+    steps = spared = tested = 0
+    while s.t < min(sc.solver.t_end, 0.6) - 1e-12 and steps < 400:
+        contacts, peak = S.physical.contacts.copy(), S.book.peak_tension.copy()
+        near = S.broad_phase.near.copy()
+        nnear = int(S.broad_phase.count[0])
+        s.step()
+        I = S.integrator
+        t0, h = float(I.clock["t_prev"][0]), float(I.clock["h_last"][0])
+        y0, q = I.y_prev.copy(), I.dense.copy()
+        ys = s.dense_output()(t0 + theta * h)
+        accels = np.array([base_accel.py_func(s.excitation, t, t0) for t in t0 + theta * h])
+        obs = observe.empty(len(theta), M.berry.shape[0], M.n_dof, contacts.shape[0])
+        observe.observe(np.ascontiguousarray(ys), np.repeat(contacts[None], len(theta), 0), accels, M, obs)
+        largest = obs.pedicel_tension.max(axis=0)
+        args = (t0, h, y0, q, M, s.excitation, S.input[0], contacts, near, nnear, kin)
+        spared += _bounded(*args, peak, reach)
+        for i in range(M.berry.shape[0]):
+            probe = np.full(M.berry.shape[0], np.inf)
+            probe[i] = largest[i] - 1e-9 * abs(largest[i])
+            if _bounded(*args, probe, reach):
+                raise AssertionError(f"step {steps} at t = {t0:.6f} s: berry {i}'s tension reaches {largest[i]!r} N, "
+                                     f"the bound says it stays below {probe[i]!r} N")
+            tested += 1
+        steps += 1
+    assert tested > 0
+    if name == "paper collision":
+        assert spared > steps / 2, (spared, steps)

@@ -70,6 +70,33 @@ def applied_accel(X, inp, t, t_ref):
     return base_accel(X, t, t_ref)
 
 
+@inline
+def pull_bound(X, inp, t0, t1, g):
+    """An upper bound on |a + g ẑ| over [t0, t1] on the piece that holds t0 (as the solver evaluates a step), the
+    largest pull per unit mass that gravity and the moving rachis put on a berry (forces.frame_fields), or inf where
+    the rachis turns (α ≠ 0) or no bound is known. Exact for a held or constant acceleration; a table's row is linear
+    in t, so |a + g ẑ| is largest at a step end; a chirp's sine lies in [−1, 1], so at ± its amplitude."""
+    if inp.held:
+        if inp.alpha_x != 0.0 or inp.alpha_y != 0.0 or inp.alpha_z != 0.0:
+            return np.inf
+        return math.sqrt(inp.ax * inp.ax + inp.ay * inp.ay + (inp.az + g) ** 2)
+    if X.kind == CONSTANT or X.kind == CHIRP:
+        p = X.par
+        if p[3] != 0.0 or p[4] != 0.0 or p[5] != 0.0:
+            return np.inf
+        up = math.sqrt(p[0] * p[0] + p[1] * p[1] + (p[2] + g) ** 2)
+        if X.kind == CONSTANT:
+            return up
+        return max(up, math.sqrt(p[0] * p[0] + p[1] * p[1] + (g - p[2]) ** 2), g)
+    worst = 0.0
+    for t in (t0, t1):
+        ax, ay, az, alx, aly, alz = table_accel(X.table, t, t0)
+        if alx != 0.0 or aly != 0.0 or alz != 0.0:
+            return np.inf
+        worst = max(worst, math.sqrt(ax * ax + ay * ay + (az + g) ** 2))
+    return worst
+
+
 @jit
 def _series(X, t, out):
     for k in range(t.shape[0]):

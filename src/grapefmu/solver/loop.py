@@ -48,6 +48,7 @@ class Buffers(NamedTuple):
     samples: np.ndarray  # (N_SAMPLES + 1, N) KINEMATICS: the berries at the step's samples
     travel: np.ndarray   # (N, 2) how far each berry can get in the step, rachis and world frame (broadphase.quiet)
     suspect: np.ndarray  # (P,) whether the k-th near pair can switch in the step (broadphase.quiet)
+    reach: np.ndarray    # (N, 3) each berry's travel, |u̇| and |F| bounds on the step (sampling.tensions_bounded)
     path: np.ndarray     # (D + 1, 3) or (0, 3): an island's window's extrapolated angles (drift.anchor)
     drifted: np.ndarray  # (N,) or (0,): how far each berry got from them (drift.drift)
     members: np.ndarray  # (N,) or (0,): an island's berries in the scene (handover.form)
@@ -64,6 +65,7 @@ def buffers(M, ny, island):
                    np.zeros(p, dtype=np.int64), np.zeros((N_SAMPLES + 1, 2 * p)),
                    np.zeros((N_SAMPLES + 1, 2 * p)), workspace(M),
                    samples_for(M), np.zeros((M.berry.shape[0], 2)), np.ones(p, dtype=np.bool_),
+                   np.zeros((M.berry.shape[0], 3)),
                    np.zeros((M.n_dof + 1 if island else 0, 3)), np.zeros(M.berry.shape[0] if island else 0),
                    np.zeros(M.berry.shape[0] if island else 0, np.int64),
                    np.zeros(M.pair.shape[0] if island else 0, np.int64), np.zeros(ny if island else 0, np.int64))
@@ -235,8 +237,9 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         t_commit = t_new if not event or theta_e >= 1.0 else t0 + theta_e * h
         if R.cursor[0].grid_dt > 0.0 and not record_grid(t0, t_commit, h, P.y, q, X, inp, C, Bk.totals, R):
             return OUT_FULL
-        sample_step(t0, h, theta_e, P.y, q, M, X, inp, C, B.near, B.count[0], Bk.totals, Bk.pair, Bk.peak_tension, cfg,
-                    W, work, fbuf, pwbuf, cls, Z.tension, Z.pushing, samples, sampled, start_sampled)
+        ended = sample_step(t0, h, theta_e, P.y, q, M, X, inp, C, B.near, B.count[0], Bk.totals, Bk.pair,
+                            Bk.peak_tension, cfg, W, work, fbuf, pwbuf, cls, Z.tension, Z.pushing, samples, sampled,
+                            start_sampled, Z.reach)
         # --- commit
         I.y_prev[:] = P.y
         if event:
@@ -257,7 +260,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
                                                   W.berry, cls, Z.suspect)
         # a whole step's end was sampled (sample_step); the next step's start is it while nothing switched, the list
         # was not rebuilt and no breakpoint moved the acceleration (step control switches smooth pairs silently)
-        start_sampled = not event and not cfg.step_control
+        start_sampled = ended and not event and not cfg.step_control
         if far > 0.25 * cfg.skin:
             # rebuild early, from where the step ended, so the list stays valid for the next steps
             kinematics(P.y, M, W.berry)

@@ -7,10 +7,11 @@ import numpy as np
 
 from ..physics.compiled import inline, jit
 from ..physics.damage import detaching
-from ..physics.excitation import applied_accel
-from ..physics.forces import active, berry_force, forces, pair_force, pedicel_tension
+from ..physics.excitation import applied_accel, pull_bound
+from ..physics.forces import active, berry_force, coupling, forces, pair_force, pedicel_tension
 from ..physics.kinematics import Workspace, berry_kinematics, kinematics, pair_state, rachis_frame
 from ..physics.layout import model_head
+from .broadphase import travel
 from .events import EV_FORCE, GOLDEN, N_SAMPLES, ROOT_TOL, brent_keep, brent_point, check_bruising, classify, largest_on
 from .step import dense_berry, dense_head, dense_pair, dense_rachis
 
@@ -61,7 +62,7 @@ def integrate_gauss(h, theta_end, y0, q, M, contacts, near, nnear, book_pair, ki
 
 @jit
 def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, totals, book_pair, peak_tension, cfg, W,
-                work, fbuf, pwbuf, cls, tbuf, pushing, samples, sampled, start_sampled):
+                work, fbuf, pwbuf, cls, tbuf, pushing, samples, sampled, start_sampled, reach):
     """Book the step up to θ = theta_end.
 
     Every berry's pedicel tension is sampled at θ = k / N_SAMPLES inside the committed part (its end is the next
@@ -73,11 +74,17 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
     start_sampled: this step's start is the last step's end, sampled there in the same modes on the same near list
     (loop.integrate), so its tensions are booked and its pairs' row is that step's last: copied, not evaluated again
     (a fifth of the samples on a step that follows a whole one).
-    Each berry's tensions at the samples stay in tbuf (N_SAMPLES + 1, N), for refine_tensions (pushing: its scratch)."""
+    Each berry's tensions at the samples stay in tbuf (N_SAMPLES + 1, N), for refine_tensions (pushing: its scratch).
+    A step the broad phase did not sample, with no pair that can push, on which no berry's tension can pass its peak
+    (tensions_bounded; reach: its scratch) is not sampled at all: nothing on it could raise a peak or an integral.
+    Returns whether the samples hold the step's end (row N_SAMPLES), which the next step's start may copy."""
     tot = totals[0]
     berry, kin = M.berry, W.berry
     span = theta_end * h
     whole = theta_end == 1.0
+    if whole and not sampled and tensions_bounded(t0, h, y0, q, M, X, inp, contacts, near, nnear, samples[0],
+                                                  peak_tension, reach):
+        return False
     if start_sampled:
         for kk in range(nnear):
             fbuf[0, kk], pwbuf[0, kk], cls[0, kk] = fbuf[N_SAMPLES, kk], pwbuf[N_SAMPLES, kk], cls[N_SAMPLES, kk]
@@ -191,6 +198,52 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
             check_bruising(bp, tot, M, M.pair[p], cfg)
     refine_tensions(t0, h, theta_end, last, y0, q, M, X, inp, contacts, near, nnear, tbuf, pushing, peak_tension, tot,
                     cfg, kin, work)
+    return True
+
+
+@inline
+def tensions_bounded(t0, h, y0, q, M, X, inp, contacts, near, nnear, kin, peak_tension, reach):
+    """Whether no berry's pedicel tension can pass its booked peak anywhere on the step's dense output (docs/solver.md,
+    "Peaks"): T = m l |u̇|² + F·u ≤ m l ω² + |F| with ω a bound on |u̇| (u is 1-Lipschitz in s and in t, so
+    |u̇| ≤ |ṡ| + |ṫ|, each bounded by its start value and broadphase.travel), where F is the pull of gravity and the
+    rachis (excitation.pull_bound) and the couplings' springs and dampers, each bounded by its value at the start
+    (kin: stage 1 there) and how far its berries get. Contact is not bounded: a near pair that can push, or a rachis
+    that turns, answers False. reach ((N, 3) scratch): each berry's twig-end travel, its ω and its bound on |F|.
+    Why: a quiet step's inner samples evaluate every berry three times to book peaks that, once a berry has swung
+    harder before, they cannot raise (paper collision: a fifth of the loop's time, benchmarks/loop_sections.py)."""
+    if M.turning:
+        return False
+    for kk in range(nnear):
+        if active(contacts[near[kk]]):
+            return False
+    pull = pull_bound(X, inp, t0, t0 + h, M.gravity)
+    if not pull < np.inf:
+        return False
+    berry, nd = M.berry, M.n_dof
+    for i in range(berry.shape[0]):
+        b = berry[i]
+        o = b.dof
+        moved = travel(q, h, o)
+        rate = abs(y0[nd + o]) + travel(q, h, nd + o)
+        if b.n_angles == 2:
+            moved += travel(q, h, o + 1)
+            rate += abs(y0[nd + o + 1]) + travel(q, h, nd + o + 1)
+        reach[i, 0] = b.twig_length * moved
+        reach[i, 1] = rate
+        reach[i, 2] = b.mass * pull
+    for k in range(M.coupling.shape[0]):
+        cp = M.coupling[k]
+        i, j = cp.i, cp.j
+        _, sep, _ = coupling(cp, berry[i], berry[j], kin[i], kin[j])
+        f = abs(cp.stiffness) * (abs(sep) + reach[i, 0] + reach[j, 0]) + abs(cp.damping) * (
+            berry[i].twig_length * reach[i, 1] + berry[j].twig_length * reach[j, 1])
+        reach[i, 2] += f
+        reach[j, 2] += f
+    for i in range(berry.shape[0]):
+        b = berry[i]
+        if b.mass * b.twig_length * reach[i, 1] ** 2 + reach[i, 2] > peak_tension[i]:
+            return False
+    return True
 
 
 @inline
