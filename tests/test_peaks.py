@@ -73,15 +73,26 @@ def _coupled_chirp():
                       solver={"t_end": 0.6}))
 
 
-@pytest.mark.parametrize("name", ["paper collision", "pick and place", "coupled chirp", "cluster"])
-def test_the_tension_bound_is_never_below_the_tension_on_the_step(name):
+def _turned_pick_and_place():
+    from .conftest import dual, scene
+    return scene(dual(angles=(0.0, 0.0), solver={"t_end": 0.6},
+                      excitation={"kind": "pick-and-place", "orientation": [0.0, 0.3, 0.0],
+                                  "moves": [{"displacement": [0.3, 0.1], "duration": 0.4}]}))
+
+
+@pytest.mark.parametrize("name, turning", [("paper collision", False), ("pick and place", False),
+                                           ("coupled chirp", False), ("cluster", False), ("paper collision", True),
+                                           ("turned pick and place", True)])
+def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, turning):
     """A step whose tensions cannot pass their peaks is not sampled (sampling.tensions_bounded). On every step of a run,
     the bound is tested against the tension the observation computes (physics/observe.py) at 400 points of the step's
     dense output: told a peak just below a berry's largest tension there, it must say the step can pass it. On the
-    paper collision it must also spare most steps, or it saves nothing."""
-    sc = {"coupled chirp": _coupled_chirp, "cluster": lambda: scale_scene("cluster", 4, 1e-6, 0.6)}.get(
-        name, lambda: build(bench_scenes()[name]))()
-    s = Solver(sc, rtol=1e-6, atol=1e-8)
+    paper collision it must also spare most steps, or it saves nothing; so must a face's solver of it, built to turn
+    (turning: its state carries the rachis' orientation and ω). The turned pick and place tilts the rachis by a
+    start orientation it keeps (the turned frame's fields)."""
+    sc = {"coupled chirp": _coupled_chirp, "cluster": lambda: scale_scene("cluster", 4, 1e-6, 0.6),
+          "turned pick and place": _turned_pick_and_place}.get(name, lambda: build(bench_scenes()[name]))()
+    s = Solver(sc, rtol=1e-6, atol=1e-8, turning=turning)
     S, M = s.state, s.M
     kin = samples_for(M)[0]
     reach = np.zeros((M.berry.shape[0], 3))

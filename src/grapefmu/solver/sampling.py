@@ -10,7 +10,7 @@ from ..physics.damage import detaching
 from ..physics.excitation import applied_accel, pull_bound
 from ..physics.forces import active, berry_force, coupling, forces, pair_force, pedicel_tension
 from ..physics.kinematics import Workspace, berry_kinematics, kinematics, pair_state, rachis_frame
-from ..physics.layout import model_head
+from ..physics.layout import model_head, model_offsets
 from .broadphase import travel
 from .events import EV_FORCE, GOLDEN, N_SAMPLES, ROOT_TOL, brent_keep, brent_point, check_bruising, classify, largest_on
 from .step import dense_berry, dense_head, dense_pair, dense_rachis
@@ -207,12 +207,17 @@ def tensions_bounded(t0, h, y0, q, M, X, inp, contacts, near, nnear, kin, peak_t
     "Peaks"): T = m l |u̇|² + F·u ≤ m l ω² + |F| with ω a bound on |u̇| (u is 1-Lipschitz in s and in t, so
     |u̇| ≤ |ṡ| + |ṫ|, each bounded by its start value and broadphase.travel), where F is the pull of gravity and the
     rachis (excitation.pull_bound) and the couplings' springs and dampers, each bounded by its value at the start
-    (kin: stage 1 there) and how far its berries get. Contact is not bounded: a near pair that can push, or a rachis
-    that turns, answers False. reach ((N, 3) scratch): each berry's twig-end travel, its ω and its bound on |F|.
+    (kin: stage 1 there) and how far its berries get; a rachis turned but not spinning pulls with the same |a + g ẑ|
+    (rotation keeps lengths). Contact and the fields of a spinning rachis (Euler, centrifugal, Coriolis) are not
+    bounded: a near pair that can push, or ω or α other than zero on the step, answers False. reach ((N, 3)
+    scratch): each berry's twig-end travel, its ω and its bound on |F|.
     Why: a quiet step's inner samples evaluate every berry three times to book peaks that, once a berry has swung
     harder before, they cannot raise (paper collision: a fifth of the loop's time, benchmarks/loop_sections.py)."""
-    if M.turning:
-        return False
+    if M.turning:  # ω ≡ 0 on the step: zero at its start and no travel (α = 0: pull_bound)
+        o_om = model_offsets(M)[2]
+        for r in range(o_om, o_om + 3):
+            if y0[r] != 0.0 or travel(q, h, r) != 0.0:
+                return False
     for kk in range(nnear):
         if active(contacts[near[kk]]):
             return False
