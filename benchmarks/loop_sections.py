@@ -102,7 +102,8 @@ def main() -> None:
     st = s.stats
     n = st["steps"]
     ns = best / rate * 1e9 / n
-    print(f"{name}, rtol {a.rtol:g}: {n} steps ({st['quiet_steps']} quiet, {st['rejected']} rejected), "
+    print(f"{name}, rtol {a.rtol:g}: {n} steps ({st['quiet_steps']} quiet, {st['spared_steps']} spared, "
+          f"{st['rejected']} rejected), "
           f"{st['rhs_evaluations']} RHS evaluations; cycle counter {rate / 1e9:.2f} GHz; minimum of {a.repeats}")
     print("| section | ns a step | share |\n|---|---|---|")
     for (_, label), v in zip(PROBES[1:], ns[1:]):

@@ -39,7 +39,8 @@ def main(name: str = "paper collision", rtol: float = 1e-6) -> None:
     grid = best["loop, 1 ms grid"] - best["loop, no grid"]
     beyond = (best["loop, no grid"] - floor) / s["steps"]
     print(f"{name}, rtol {rtol:g}, {t_end:g} s simulated: {s['steps']} steps ({s['quiet_steps']} quiet, "
-          f"{s['rejected']} rejected), {s['rhs_evaluations']} RHS evaluations at {rhs * 1e9:.0f} ns")
+          f"{s['spared_steps']} spared, {s['rejected']} rejected), {s['rhs_evaluations']} RHS evaluations at "
+          f"{rhs * 1e9:.0f} ns")
     print(f"  simulate             {best['simulate'] * 1e3:8.3f} ms  ({best['simulate'] / t_end * 1e3:.3f} ms per simulated s)")
     print(f"  Python around loop   {python * 1e3:8.3f} ms  (of it Solver() {best['Solver()'] * 1e3:.3f} ms)")
     print(f"  output grid          {grid * 1e3:8.3f} ms  ({grid / max(len(run.t) - 1, 1) * 1e9:.0f} ns a sample)")

@@ -66,39 +66,55 @@ def _bounded(t0, h, y0, q, M, X, inp, contacts, near, nnear, kin, peak, reach):
     return tensions_bounded(t0, h, y0, q, M, X, inp, contacts, near, nnear, kin, peak, reach)
 
 
-def _coupled_chirp():
+def _dual(**kw):
     from .conftest import dual, scene
-    return scene(dual(angles=(0.0, 0.2), coupling={"stiffness": 0.5, "damping": 0.002},
-                      excitation={"kind": "sweep", "amplitude": [6.0, 3.0], "f_start": 2.0, "f_stop": 12.0},
-                      solver={"t_end": 0.6}))
+    return scene(dual(**kw))
 
 
-def _turned_pick_and_place():
-    from .conftest import dual, scene
-    return scene(dual(angles=(0.0, 0.0), solver={"t_end": 0.6},
-                      excitation={"kind": "pick-and-place", "orientation": [0.0, 0.3, 0.0],
-                                  "moves": [{"displacement": [0.3, 0.1], "duration": 0.4}]}))
+CASES = {  # the scenes the bound is tested on beyond the benchmark's, each for a branch of it
+    "coupled chirp": lambda: _dual(  # a stiff coupling under a chirp
+        angles=(0.0, 0.3), coupling={"stiffness": 5.0, "damping": 0.01}, solver={"t_end": 0.6},
+        excitation={"kind": "sweep", "amplitude": [6.0, -4.0], "f_start": 2.0, "f_stop": 12.0}),
+    "vertical chirp": lambda: _dual(  # hanging berries shaken up and down: the pull at −A is the largest
+        angles=(0.0, 0.0), solver={"t_end": 0.6},
+        excitation={"kind": "sweep", "amplitude": [0.5, -6.0], "f_start": 2.0, "f_stop": 12.0}),
+    "spherical tilt": lambda: _dual(  # two spherical berries swinging in tilt alone (the ṫ terms), far apart
+        d0=0.2, angles=(0.0, 0.0), left={"kind": "spherical", "angle": [0.0, 0.6]},
+        right={"kind": "spherical", "angle": [0.0, -0.4], "angular_velocity": [0.0, 3.0]}, solver={"t_end": 0.6}),
+    "turned pick and place": lambda: _dual(  # a rachis turned at the start, then carried without turning
+        angles=(0.0, 0.0), solver={"t_end": 0.6},
+        excitation={"kind": "pick-and-place", "orientation": [0.0, 0.3, 0.0],
+                    "moves": [{"displacement": [0.3, 0.1], "duration": 0.4}]}),
+    "spinning": lambda: _dual(  # a rachis spinning about y from the start: the bound must never hold
+        angles=(0.0, 0.0), solver={"t_end": 0.6}, excitation={"kind": "none", "angular_velocity": [0.0, 6.0, 0.0]}),
+    "cluster": lambda: scale_scene("cluster", 4, 1e-6, 0.6),
+}
+#: a held input (a face's), set by one advance() before the steps
+HELD = (2.0, 0.0, 3.0, 0.0, 0.0, 0.0)
 
 
-@pytest.mark.parametrize("name, turning", [("paper collision", False), ("pick and place", False),
-                                           ("coupled chirp", False), ("cluster", False), ("paper collision", True),
-                                           ("turned pick and place", True)])
-def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, turning):
-    """A step whose tensions cannot pass their peaks is not sampled (sampling.tensions_bounded). On every step of a run,
-    the bound is tested against the tension the observation computes (physics/observe.py) at 400 points of the step's
-    dense output: told a peak just below a berry's largest tension there, it must say the step can pass it. On the
-    paper collision it must also spare most steps, or it saves nothing; so must a face's solver of it, built to turn
-    (turning: its state carries the rachis' orientation and ω). The turned pick and place tilts the rachis by a
-    start orientation it keeps (the turned frame's fields)."""
-    sc = {"coupled chirp": _coupled_chirp, "cluster": lambda: scale_scene("cluster", 4, 1e-6, 0.6),
-          "turned pick and place": _turned_pick_and_place}.get(name, lambda: build(bench_scenes()[name]))()
+@pytest.mark.parametrize("name, turning, held", [
+    ("paper collision", False, False), ("pick and place", False, False), ("coupled chirp", False, False), ("vertical chirp", False, False),
+    ("spherical tilt", False, False), ("cluster", False, False), ("paper collision", True, False),
+    ("paper collision", True, True), ("turned pick and place", True, False), ("spinning", True, False)])
+def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, turning, held):
+    """A step whose tensions cannot pass their peaks is not sampled (sampling.tensions_bounded). On every step of the
+    first 0.6 s of a run (at most 400), the bound is tested against the tension the observation computes
+    (physics/observe.py) at 400 points of the step's dense output: told a peak just below a berry's largest tension
+    there, it must say the step can pass it. The cases reach its branches: a face's solver (turning: its state carries
+    the rachis' orientation and ω), a held input, chirps, a table, a coupling, spherical berries, a turned rachis and a
+    spinning one (for which it must never hold)."""
+    sc = CASES[name]() if name in CASES else build(bench_scenes()[name])
     s = Solver(sc, rtol=1e-6, atol=1e-8, turning=turning)
     S, M = s.state, s.M
+    if held:
+        s.advance(1e-4, HELD)
+        assert S.input["held"][0]
     kin = samples_for(M)[0]
     reach = np.zeros((M.berry.shape[0], 3))
     theta = np.r_[np.arange(400) / 400, 1.0 - 1e-9]
-    steps = spared = tested = 0
-    while s.t < min(sc.solver.t_end, 0.6) - 1e-12 and steps < 400:
+    steps = bounded = tested = 0
+    while s.t < 0.6 - 1e-12 and steps < 400:
         contacts, peak = S.physical.contacts.copy(), S.book.peak_tension.copy()
         near = S.broad_phase.near.copy()
         nnear = int(S.broad_phase.count[0])
@@ -107,12 +123,13 @@ def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, turning)
         t0, h = float(I.clock["t_prev"][0]), float(I.clock["h_last"][0])
         y0, q = I.y_prev.copy(), I.dense.copy()
         ys = s.dense_output()(t0 + theta * h)
-        accels = np.array([base_accel.py_func(s.excitation, t, t0) for t in t0 + theta * h])
+        accels = np.tile(HELD, (len(theta), 1)) if held else \
+            np.array([base_accel.py_func(s.excitation, t, t0) for t in t0 + theta * h])
         obs = observe.empty(len(theta), M.berry.shape[0], M.n_dof, contacts.shape[0])
         observe.observe(np.ascontiguousarray(ys), np.repeat(contacts[None], len(theta), 0), accels, M, obs)
         largest = obs.pedicel_tension.max(axis=0)
         args = (t0, h, y0, q, M, s.excitation, S.input[0], contacts, near, nnear, kin)
-        spared += _bounded(*args, peak, reach)
+        bounded += _bounded(*args, peak, reach)
         for i in range(M.berry.shape[0]):
             probe = np.full(M.berry.shape[0], np.inf)
             probe[i] = largest[i] - 1e-9 * abs(largest[i])
@@ -122,5 +139,16 @@ def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, turning)
             tested += 1
         steps += 1
     assert tested > 0
-    if name == "paper collision":
-        assert spared > steps / 2, (spared, steps)
+    if name == "spinning":
+        assert bounded == 0
+    elif name != "cluster":  # the cluster's berries touch most of the time
+        assert bounded > 0, "the bound never held: its branch was not tested"
+
+
+@pytest.mark.parametrize("turning", [False, True])
+def test_most_quiet_steps_of_the_paper_collision_are_spared(turning):
+    """The loop leaves out the booking pass of most of its quiet steps (stats: spared_steps), for `simulate` and for a
+    face's solver, which is built to turn; only a quiet step can be spared in a scene with pairs."""
+    run = Solver(build(bench_scenes()["paper collision"]), rtol=1e-6, atol=1e-8, turning=turning).run()
+    st = run.stats
+    assert st["quiet_steps"] / 2 < st["spared_steps"] <= st["quiet_steps"], st

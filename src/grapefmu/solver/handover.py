@@ -96,8 +96,8 @@ def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid
     tot.collision_count, tot.bruising_impacts, tot.berries_over_detachment_force = 0, 0, 0
     tot.peak_contact_force, tot.peak_pedicel_tension = 0.0, -np.inf
     cnt = S.book.counters[0]
-    cnt.steps, cnt.rejected, cnt.rhs_evaluations, cnt.switches = 0, 0, 0, 0
-    cnt.zeno_activations, cnt.near_pairs_sum, cnt.near_list_rebuilds, cnt.quiet_steps = 0, 0, 0, 0
+    for f in literal_unroll(WORK):
+        cnt[f] = 0
     inp = S.input[0]
     inp.held = False
     clk = S.integrator.clock[0]

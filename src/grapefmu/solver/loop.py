@@ -240,6 +240,8 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
         ended = sample_step(t0, h, theta_e, P.y, q, M, X, inp, C, B.near, B.count[0], Bk.totals, Bk.pair,
                             Bk.peak_tension, cfg, W, work, fbuf, pwbuf, cls, Z.tension, Z.pushing, samples, sampled,
                             start_sampled, Z.reach)
+        if not ended:
+            cnt.spared_steps += 1
         # --- commit
         I.y_prev[:] = P.y
         if event:

@@ -77,7 +77,8 @@ def sample_step(t0, h, theta_end, y0, q, M, X, inp, contacts, near, nnear, total
     Each berry's tensions at the samples stay in tbuf (N_SAMPLES + 1, N), for refine_tensions (pushing: its scratch).
     A step the broad phase did not sample, with no pair that can push, on which no berry's tension can pass its peak
     (tensions_bounded; reach: its scratch) is not sampled at all: nothing on it could raise a peak or an integral.
-    Returns whether the samples hold the step's end (row N_SAMPLES), which the next step's start may copy."""
+    Returns False when it left the step out (its rows hold nothing of it: the next step evaluates its start), else
+    True."""
     tot = totals[0]
     berry, kin = M.berry, W.berry
     span = theta_end * h

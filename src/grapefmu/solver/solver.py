@@ -389,7 +389,8 @@ def run_stats(counters: np.ndarray, totals: np.ndarray, layout, n_pairs: int) ->
             "switches": c["switches"], "impacts": int(totals["collision_count"][0]),
             "zeno_guard_activations": c["zeno_activations"], "degrees_of_freedom": layout.d,
             "candidate_pairs": n_pairs, "near_pairs_mean": c["near_pairs_sum"] / max(c["steps"], 1),
-            "near_list_rebuilds": c["near_list_rebuilds"], "quiet_steps": c["quiet_steps"]}
+            "near_list_rebuilds": c["near_list_rebuilds"], "quiet_steps": c["quiet_steps"],
+            "spared_steps": c["spared_steps"]}
 
 
 def tableau_for(method: str, rtol: float, fixed_step: float) -> Tableau:

@@ -35,7 +35,7 @@ CLOCK = np.dtype([("h", "f8"), ("t_prev", "f8"), ("h_last", "f8"), ("break_index
 #: how much work the solver did
 BOOK_COUNTERS = np.dtype([("steps", "i8"), ("rejected", "i8"), ("rhs_evaluations", "i8"), ("switches", "i8"),
                           ("zeno_activations", "i8"), ("near_pairs_sum", "i8"), ("near_list_rebuilds", "i8"),
-                          ("quiet_steps", "i8")])
+                          ("quiet_steps", "i8"), ("spared_steps", "i8")])
 #: per pair: the impact going on (valid while the pair is in contact), running totals, the Zeno guard
 BOOK_PAIR = np.dtype([("onset", "f8"), ("approach_speed", "f8"), ("impact_peak", "f8"), ("impact_peak_time", "f8"),
                       ("impulse_at_onset", "f8"), ("dissipated_at_onset", "f8"), ("bruising", "?"),
