@@ -6,8 +6,9 @@
 Two worker processes, one per version (the other version's `src` first on its path), get the same
 requests in turn, so both run on the same machine state:
 - every scene in scenes/ (the paper's tests included) and every benchmark scene at rtol 1e-10
-  (atol 1e-12): the largest angle difference between the versions on the output grid, and, where both
-  versions book the same impacts, the largest difference in their onsets, peak forces and peak times;
+  (atol 1e-12): the largest angle difference between the versions on the output grid, the largest relative
+  difference in a berry's peak pedicel tension, and, where both versions book the same impacts, the largest
+  difference in their onsets, peak forces and peak times;
 - every benchmark scene over the benchmark's rtol ladder: wall time per simulated second (minimum of
   --repeats, the two versions alternating) and the cost at 1e-6 rad interpolated on each version's own
   work–precision curve against the new version's rtol 1e-13 reference, as `grapefmu bench` does.
@@ -51,7 +52,7 @@ for line in sys.stdin:
         run = grapefmu.simulate(sc, rtol=req["rtol"], atol=req["rtol"] * 1e-2, output_interval=1e-3)
         imp = run.impacts
         np.savez(req["file"], y=np.column_stack([run.t, run.angles]), onset=imp.onset, peak_force=imp.peak_force,
-                 peak_time=imp.peak_time)
+                 peak_time=imp.peak_time, peak_tension=run.peak_tension)
         print(json.dumps({"ok": True}), flush=True)
     else:
         t0 = time.perf_counter()
@@ -98,7 +99,8 @@ def main() -> int:
     new, old = Worker(ROOT / "src", "new"), Worker(Path(a.old) / "src", "old")
     tmp = Path(tempfile.mkdtemp())
     worst = 0.0
-    print(f"{'scene':<40} {'max |Δ angle| at rtol 1e-10 (rad)':>34} {'impacts':>8} {'|Δ onset| (s)':>14} "
+    print(f"{'scene':<40} {'max |Δ angle| at rtol 1e-10 (rad)':>34} {'Δ peak tension (rel)':>21} {'impacts':>8} "
+          f"{'|Δ onset| (s)':>14} "
           f"{'Δ peak force (rel)':>19} {'|Δ peak time| (s)':>18}")
     for name in new.scenes:
         if name not in old.scenes:
@@ -111,6 +113,8 @@ def main() -> int:
         yn, yo = rn["y"], ro["y"]
         d = float(np.abs(yn - yo).max()) if yn.shape == yo.shape else math.inf
         worst = max(worst, d)
+        tn, to = rn["peak_tension"], ro["peak_tension"]  # each berry's
+        dt = float((np.abs(tn - to) / np.maximum(np.abs(to), 1e-300)).max()) if tn.shape == to.shape else math.inf
         n = len(rn["onset"])
         if n != len(ro["onset"]):
             impacts = f"{n} / {len(ro['onset'])}: the versions' impact counts differ"
@@ -120,7 +124,7 @@ def main() -> int:
             rel = np.abs(rn["peak_force"] - ro["peak_force"]) / np.maximum(np.abs(ro["peak_force"]), 1e-300)
             impacts = (f"{n:>8} {np.abs(rn['onset'] - ro['onset']).max():>14.2e} {rel.max():>19.2e} "
                        f"{np.abs(rn['peak_time'] - ro['peak_time']).max():>18.2e}")
-        print(f"{name:<40} {d:>34.3e} {impacts}", flush=True)
+        print(f"{name:<40} {d:>34.3e} {dt:>21.2e} {impacts}", flush=True)
     print(f"largest difference: {worst:.3e} rad (bound 1e-9)")
     if not a.quick:
         print(f"\n{'benchmark scene':<28} {'old ms/s @1e-6':>15} {'new ms/s @1e-6':>15} {'new/old':>8}"
