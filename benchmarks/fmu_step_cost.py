@@ -122,7 +122,7 @@ def core_cost() -> float:
     best = 1e9
     still = (0.0, 0.0, 0.0)
     for _ in range(3):
-        s = Solver(load_scene(default_scene_path()), turning=True)  # the FMU's: its inputs may turn the rachis
+        s = Solver(load_scene(default_scene_path()), driven=True)  # the FMU's: its inputs may turn the rachis
         w = time.perf_counter()
         for k in range(N_STEPS):
             s.advance(DT, (float(acc[k]), 0.0, 0.0, 0.0, 0.0, 0.0), still)  # what the FMU's step calls

@@ -127,7 +127,7 @@ def test_the_fmus_import_path_loads_no_scipy_integrate():
     (tests/test_fmu_hardening.py); what the FMU imports to step and report must not load it."""
     code = ("import sys, grapefmu, grapefmu_fmu.core, grapefmu_fmu.fmi2, grapefmu_fmu.fmi3\n"
             "from grapefmu import Solver\nfrom grapefmu.scenefile import load_scene\n"
-            f"s = Solver(load_scene({str(ROOT / 'scenes' / 'default.toml')!r}), turning=True)\n"
+            f"s = Solver(load_scene({str(ROOT / 'scenes' / 'default.toml')!r}), driven=True)\n"
             "s.advance(1e-3, (1.0, 0.0, 0.0, 0.0, 0.0, 0.0)); s.snapshot()\n"
             "print(sorted(m for m in sys.modules if m.startswith('scipy.integrate')))")
     env = {**os.environ, "PYTHONPATH": f"{ROOT / 'src'}{os.pathsep}{ROOT / 'fmu_build'}"}
@@ -219,7 +219,7 @@ keep("fixed step", grapefmu.simulate(load_scene(f"{scenes}/default.toml"), 1.0, 
 keep("obstacles", grapefmu.simulate(load_scene(f"{scenes}/setdown_fast.toml")))
 keep("cluster", grapefmu.simulate(scale_scene("cluster", 30), 0.3))
 keep("islands", Islands(scale_scene("cluster", 30)).run(0.3))
-s = Solver(load_scene(f"{scenes}/default.toml"), turning=True)  # as the FMU's and the node's (a planar scene
+s = Solver(load_scene(f"{scenes}/default.toml"), driven=True)  # as the FMU's and the node's (a planar scene
 for k in range(400):                                                 # turns about the rachis' y axis only)
     s.advance(1e-3, base_accel=(3.0 * np.sin(0.05 * k), -2.0, 1.0, 0.0, 20.0 * np.cos(0.02 * k), 0.0),
               angular_velocity=(0.0, 0.5 * np.sin(0.03 * k), 0.0))

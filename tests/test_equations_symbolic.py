@@ -106,7 +106,7 @@ def test_compiled_rhs_matches_lagrange_equations(law):
                    tuple(q), tuple(w))
         y = Solver(sc).y
         ax, ay = rng.uniform(-5, 5, 2)
-        dyv = derivative(sc.model.arrays, y, loaded(1), (ax, 0.0, ay, 0.0, 0.0, 0.0))
+        dyv = derivative(sc.arrays, y, loaded(1), (ax, 0.0, ay, 0.0, 0.0, 0.0))
         bb, pp = sc.model.arrays.berry, sc.model.arrays.pair[0]
         args = (*bb["mass"], *bb["twig_length"], *bb["hinge_x"], *bb["radius"], *bb["hinge_stiffness"],
                 *bb["hinge_damping"], 9.81, ax, ay, pp["stiffness"], pp["damping"], 3.0, 0.02, 0.7, q[0], q[1], w[0], w[1])
@@ -229,7 +229,7 @@ def test_compiled_rhs_matches_lagrange_equations_spherical(law):
         berries.append(Berry("b", m[1], r[1], length[1], h2[0], kh[1], ch[1], h2[1], h2[2], True, psi[1], tuple(rest[1])))
         sc = Scene(Model(tuple(berries), (ContactPair(0, 1, law_obj),)), tuple(x), tuple(w))
         ax, az = rng.uniform(-5, 5, 2)
-        dyv = derivative(sc.model.arrays, Solver(sc).y, loaded(1), (ax, 0.0, az, 0.0, 0.0, 0.0))
+        dyv = derivative(sc.arrays, Solver(sc).y, loaded(1), (ax, 0.0, az, 0.0, 0.0, 0.0))
         args = (m[0], m[1], length[0], length[1], r[0], r[1], kh[0], kh[1], ch[0], ch[1], 9.81, ax, az,
                 law_obj.stiffness, law_obj.damping, 0.7, *h1, *h2, *psi, *rest[0], *rest[1], *x, *w)
         expect = f(*[mpmath.mpf(float(v)) for v in args])

@@ -78,7 +78,7 @@ def test_hostile_call_sequences_never_crash_and_refusals_change_nothing(fmus, tm
 
 
 def reference_angles(stop, dt, accel):
-    solver = Solver(load_scene(ROOT / "scenes" / "default.toml"), turning=True)  # as the FMU's: its inputs may turn
+    solver = Solver(load_scene(ROOT / "scenes" / "default.toml"), driven=True)  # as the FMU's: its inputs may turn
     out = []
     for _ in range(round(stop / dt)):
         solver.advance(dt, accel)

@@ -76,7 +76,7 @@ def test_a_clean_python_with_the_fmus_own_requirements_runs_it(clean_env, tmp_pa
 
     from grapefmu import Solver
     from grapefmu.scenefile import load_scene
-    s = Solver(load_scene(ROOT / "scenes" / "default.toml"), turning=True)  # as the FMU's: its inputs may turn
+    s = Solver(load_scene(ROOT / "scenes" / "default.toml"), driven=True)  # as the FMU's: its inputs may turn
     ref = []
     for _ in range(round(STOP / DT)):
         s.advance(DT, ACCEL)

@@ -210,7 +210,7 @@ def test_the_ros_node_names_and_draws_obstacles(ros, tmp_path):
         ctl.spin(0.5)
         ctl.close()
     sc = load_scene(tmp_path / "pad.toml")
-    solver = Solver(sc, turning=True)  # as the node builds it
+    solver = Solver(sc, driven=True)  # as the node builds it
     for (_, a), (t1, _) in zip(rows, rows[1:]):
         solver.advance(t1 - solver.t, a)
     np.testing.assert_allclose(list(ctl.state_at(rows[-1][0]).position), solver.angles, atol=1e-9)

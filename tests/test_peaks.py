@@ -105,7 +105,7 @@ def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, turning,
     the rachis' orientation and ω), a held input, chirps, a table, a coupling, spherical berries, a turned rachis and a
     spinning one (for which it must never hold)."""
     sc = CASES[name]() if name in CASES else build(bench_scenes()[name])
-    s = Solver(sc, rtol=1e-6, atol=1e-8, turning=turning)
+    s = Solver(sc, rtol=1e-6, atol=1e-8, driven=turning)
     S, M = s.state, s.M
     if held:
         s.advance(1e-4, HELD)
@@ -149,6 +149,6 @@ def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, turning,
 def test_most_quiet_steps_of_the_paper_collision_are_spared(turning):
     """The loop leaves out the booking pass of most of its quiet steps (stats: spared_steps), for `simulate` and for a
     face's solver, which is built to turn; only a quiet step can be spared in a scene with pairs."""
-    run = Solver(build(bench_scenes()["paper collision"]), rtol=1e-6, atol=1e-8, turning=turning).run()
+    run = Solver(build(bench_scenes()["paper collision"]), rtol=1e-6, atol=1e-8, driven=turning).run()
     st = run.stats
     assert st["quiet_steps"] / 2 < st["spared_steps"] <= st["quiet_steps"], st

@@ -258,7 +258,7 @@ def test_a_turning_table_gives_one_trajectory_through_simulate_and_the_ros_node(
 
     def held_loop(rows):
         """The same held inputs straight into Solver.advance, each step ending where the next row starts."""
-        solver, angles = Solver(scene(plain), turning=True), []  # as the node builds it
+        solver, angles = Solver(scene(plain), driven=True), []  # as the node builds it
         for (_, a, w), t1 in zip(rows, [r[0] for r in rows[1:]] + [stop]):
             solver.advance(stamp_seconds(0, to_ns(t1)) - solver.t, a, w)  # the interval as the node computes it
             angles.append(solver.angles)

@@ -74,7 +74,7 @@ def test_a_tf_listener_resolves_world_to_every_berry_and_the_urdf_names_the_same
         ctl.spin(0.5)
         ctl.close()
     scene = load_scene(default_scene_path())
-    solver = Solver(scene, turning=True)  # as the node builds it
+    solver = Solver(scene, driven=True)  # as the node builds it
     for (_, a), (t1, _) in zip(rows, rows[1:]):
         solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, a)
     snap = solver.snapshot()

@@ -171,7 +171,7 @@ def test_lockstep_answers_at_input_stamps_and_events_match_the_core(ros, tmp_pat
         stamps = {round(stamp_seconds(s.header.stamp.sec, s.header.stamp.nanosec), 9) for s in ctl.states}
         assert {round(t, 9) for t, _ in rows} <= stamps
         # the same held inputs through the core directly
-        solver = Solver(load_scene(default_scene_path()), turning=True)  # as the node builds it
+        solver = Solver(load_scene(default_scene_path()), driven=True)  # as the node builds it
         onsets = []
         for (_, a), (t1, _) in zip(rows, rows[1:]):
             solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, a)  # as the node computes it
@@ -382,7 +382,7 @@ def test_node_runs_a_cluster_with_summary_contacts_and_markers(ros, tmp_path):
         ctl.wait_for(lambda: any(s.time == pytest.approx(rows[-1][0], abs=1e-12) for s in summaries))
         ctl.spin(0.5)
         ctl.close()
-    solver = Solver(load_scene(scene), turning=True)
+    solver = Solver(load_scene(scene), driven=True)
     for (_, a), (t1, _) in zip(rows, rows[1:]):
         solver.advance(stamp_seconds(0, int(round(t1 * 1e9))) - solver.t, a)
     t_last = rows[-1][0]

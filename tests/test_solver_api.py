@@ -41,7 +41,7 @@ def test_held_acceleration_is_independent_of_the_interval_and_matches_the_refere
     doc = dual(angles=(0.0, 0.3))
     results = []
     for dt in (1e-3, 1e-2):
-        s = Solver(scene(doc))
+        s = Solver(scene(doc), driven=True)
         for _ in range(round(0.2 / dt)):
             s.advance(dt, base_accel=(4.0, -2.0))
         results.append(s.angles)
@@ -53,7 +53,7 @@ def test_held_acceleration_is_independent_of_the_interval_and_matches_the_refere
 
 
 def test_state_roundtrip_replays_bit_for_bit(collision_scene):
-    s = Solver(collision_scene)
+    s = Solver(collision_scene, driven=True)
     s.advance(0.05)
     saved = s.get_state()
     s.advance(0.3, base_accel=(1.0, 0.5))
@@ -68,7 +68,7 @@ def test_state_roundtrip_replays_bit_for_bit(collision_scene):
     (1e-3, (float("nan"), 0.0), "base_accel"), (1e-3, (0.0, float("inf")), "base_accel"),
 ])
 def test_bad_advance_is_refused_and_leaves_the_state(collision_scene, dt, accel, words):
-    s = Solver(collision_scene)
+    s = Solver(collision_scene, driven=True)
     s.advance(0.01)
     before = s.get_state()
     with pytest.raises(SolverError, match=words):
@@ -114,7 +114,7 @@ def test_held_csv_excitation_equals_held_advances(tmp_path):
     np.savetxt(tmp_path / "zoh.csv", rows, delimiter=",", header="time,ax,ay", comments="")
     doc = dual(angles=(0.0, 0.3), excitation={"kind": "csv", "file": str(tmp_path / "zoh.csv"), "hold": True})
     run = simulate(scene(doc), 0.29, rtol=1e-11, atol=1e-13)
-    s = Solver(scene(dual(angles=(0.0, 0.3))), rtol=1e-11, atol=1e-13)
+    s = Solver(scene(dual(angles=(0.0, 0.3))), rtol=1e-11, atol=1e-13, driven=True)
     for k in range(len(t) - 1):
         s.advance(0.01, base_accel=tuple(acc[k]))
     assert run.collision_count > 0
@@ -312,3 +312,32 @@ def test_a_state_belongs_to_its_scene_in_every_process():
     prints = {subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
               for _ in range(3)}
     assert len(prints) == 1
+
+
+def test_a_rachis_held_still_is_left_out_of_the_state_and_an_input_that_moves_it_is_refused(collision_scene):
+    """The paper's scenes hold the rachis still: their state is the angles, rates and energy integrals alone
+    (2D + N + C + 2 components), and a Solver of one refuses a linear acceleration by name, state intact."""
+    s = Solver(collision_scene)
+    m = collision_scene.model
+    assert s.layout.size == 2 * m.n_dof + m.n_berries + len(m.couplings) + 2
+    s.advance(0.01)
+    before = s.get_state()
+    with pytest.raises(SolverError, match=r"base_accel: .*does not move.*driven=True"):
+        s.advance(1e-3, base_accel=(1.0, 0.0))
+    assert same_state(before, s.state)
+    s.advance(1e-3, base_accel=(0.0, 0.0))  # no motion is no motion
+    snap = s.snapshot()
+    assert not snap.base_displacement.any() and snap.ledger[0, 3] == 0.0
+
+
+def test_a_still_state_gives_the_trajectory_of_one_that_carries_the_rachis(collision_scene):
+    """The same scene with and without the rachis' motion in y (a driven Solver carries it, at rest): the runs
+    agree to the tolerance asked (the error norm averages over a different number of components, so not bit for
+    bit), and the still one's rachis stays at the origin doing no work."""
+    still = Solver(collision_scene, rtol=1e-10, atol=1e-12).run(output_interval=1e-3)
+    carried = Solver(collision_scene, rtol=1e-10, atol=1e-12, driven=True).run(output_interval=1e-3)
+    assert still.layout.size + 13 == carried.layout.size
+    assert still.collision_count == carried.collision_count > 0
+    np.testing.assert_allclose(still.angles, carried.angles, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(still.ledger, carried.ledger, rtol=1e-8, atol=1e-14)
+    assert not still.base_displacement.any() and not carried.base_displacement.any()

@@ -232,7 +232,7 @@ class FmuCore:
         try:
             self.scene = self.scene_from_parameters()
             self.start_time = start_time
-            self._use(Solver(self.scene, t_start=start_time, max_steps=STEP_BUDGET, turning=True))
+            self._use(Solver(self.scene, t_start=start_time, max_steps=STEP_BUDGET, driven=True))
             self.error = None
         except GrapefmuError as e:
             self._use(None)
@@ -359,7 +359,7 @@ class FmuCore:
         key = tuple(self.values[k] for k in self._parameters)
         if getattr(self, "_probe_key", None) != key:
             try:
-                self._probe = Solver(self.scene_from_parameters(), t_start=self.start_time, turning=True).snapshot()
+                self._probe = Solver(self.scene_from_parameters(), t_start=self.start_time, driven=True).snapshot()
             except Exception:  # noqa: BLE001 - parameters the validator refuses, or anything else: the last values stand
                 self._probe = None
             self._probe_key = key
@@ -389,7 +389,7 @@ class FmuCore:
         if state["solver"] is not None:
             same = self.solver is not None and all(values[k] == self.values[k] for k in self._parameters)
             solver = self.solver if same else Solver(self.scene_from_parameters(values), max_steps=STEP_BUDGET,
-                                                     turning=True)
+                                                     driven=True)
             solver.set_state(state["solver"])  # refuses before anything changes
         self._use(solver)
         if solver is not None:

@@ -35,7 +35,7 @@ def _rhs_loop(ts, ys, contacts, M, X, inp, W, pairs, dy, repeats):
 def rhs_seconds(run, repeats: int = 7, min_wall: float = 0.02) -> float:
     """Seconds per bare RHS evaluation on the run's samples (every pair listed: a two-berry scene's near
     list), the minimum of `repeats` timings of a compiled loop over all of them."""
-    M, X = run.scene.model.arrays, run.scene.excitation.arrays
+    M, X = run.scene.arrays, run.scene.excitation.arrays
     W = workspace(M)
     pairs = np.arange(M.pair.shape[0])
     ys = np.ascontiguousarray(run.y)

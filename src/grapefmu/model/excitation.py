@@ -52,17 +52,27 @@ class Excitation:
     key: str = "excitation"   # the scene key to name when a run goes past defined_until
     orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
     angular_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    may_turn: bool = False  # a face's inputs may turn the rachis, whatever this excitation does
+    driven: bool = False  # a face's inputs may move and turn the rachis, whatever this excitation does
 
     @functools.cached_property
     def turns(self) -> bool:
         """Whether the rachis' orientation is ever other than level: it starts turned or turning, the excitation
-        turns it, or a face may (`may_turn`). A run's state carries ω and the orientation only then. Cached (the
+        turns it, or a face may (`driven`). A run's state carries ω and the orientation only then. Cached (the
         excitation is frozen): every Solver and layout asks, several times a run."""
+        return self._any(slice(3, 6)) or any(w != 0.0 for w in self.angular_velocity) or any(
+            c != 0.0 for c in self.orientation[:3])
+
+    @functools.cached_property
+    def moves(self) -> bool:
+        """Whether the rachis ever leaves the origin or turns: a run's state carries its ḃ and b only then (the
+        paper's scenes hold it still)."""
+        return self.turns or self._any(slice(0, 3))
+
+    def _any(self, columns: slice) -> bool:
+        """Whether a face drives the rachis or any of these acceleration components is ever non-zero."""
         a = self.arrays
-        rows = a.table[:, 4:7] if a.kind == TABLE else a.par[3:6]
-        return bool(self.may_turn or np.any(rows != 0.0) or any(w != 0.0 for w in self.angular_velocity)
-                    or any(c != 0.0 for c in self.orientation[:3]))
+        rows = a.table[:, 1:7] if a.kind == TABLE else a.par[:6]
+        return bool(self.driven or np.any(rows[..., columns] != 0.0))
 
     def starting(self, orientation=None, angular_velocity=None) -> "Excitation":
         """This excitation from another initial orientation (quaternion x, y, z, w) or angular velocity."""

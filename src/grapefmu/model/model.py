@@ -191,7 +191,8 @@ class ModelArrays(NamedTuple):
     obstacle: np.ndarray
     gravity: float   # m/s²
     n_dof: int       # D: angles in q
-    turning: bool = False  # the rachis may turn: its ω and orientation ride in y (Scene.arrays sets it)
+    moving: bool = True    # the rachis may move: its ḃ and b ride in y (Scene.arrays sets it)
+    turning: bool = False  # the rachis may turn: its ω and orientation ride in y too (Scene.arrays sets it)
 
 
 @dataclass(frozen=True)
@@ -470,8 +471,8 @@ class Scene:
 
     @cached_property
     def arrays(self) -> ModelArrays:
-        """The model's arrays for this scene's runs: with `turning` when its rachis may turn."""
-        return self.model.arrays._replace(turning=self.excitation.turns)
+        """The model's arrays for this scene's runs: `moving` when its rachis may move, `turning` when it may turn."""
+        return self.model.arrays._replace(moving=self.excitation.moves, turning=self.excitation.turns)
 
     @cached_property
     def digest(self) -> bytes:
@@ -489,10 +490,10 @@ class Scene:
         """Model.plane_normal under this scene's excitation, asked once per scene rather than once per Solver."""
         return self.model.plane_normal(self.excitation)
 
-    def free_to_turn(self) -> "Scene":
-        """This scene with a rachis that may turn whatever its excitation does: a face's inputs may turn it."""
+    def driven(self) -> "Scene":
+        """This scene with a rachis that may move and turn whatever its excitation does: a face's inputs drive it."""
         from dataclasses import replace
-        return self if self.excitation.may_turn else replace(self, excitation=replace(self.excitation, may_turn=True))
+        return self if self.excitation.driven else replace(self, excitation=replace(self.excitation, driven=True))
 
     @property
     def initial_state(self) -> np.ndarray:

@@ -14,7 +14,7 @@ from ..model.excitation import constant
 from .excitation import applied_accel, held
 from .forces import forces, generalized_forces, hinge_torque
 from .kinematics import kinematics, workspace
-from .layout import model_offsets
+from .layout import model_offsets, offsets
 
 
 @jit
@@ -68,6 +68,8 @@ def rhs(t, t_ref, y, dy, contacts, M, X, inp, W, pairs, n_pairs):
             dy[o_pair + npair + pairs[kk]] = W.pair[kk].power
     dy[o_contact] = diss
     dy[o_w] = work
+    if not M.moving:
+        return
     for a in range(3):
         dy[o_bv + a] = acc[a]
         dy[o_b + a] = y[o_bv + a]
@@ -92,7 +94,13 @@ __all__ = ["rhs", "rhs_inline"]
 
 def derivative(M, y, contacts, accel=(0.0,) * 6, t: float = 0.0):
     """dy/dt at one state for callers outside the compiled core (tests, checks): every pair evaluated,
-    contacts a (P,) forces.CONTACT array, the rachis acceleration accel (ACCEL_COMPONENTS, world frame) held."""
+    contacts a (P,) forces.CONTACT array, the rachis acceleration accel (ACCEL_COMPONENTS, world frame) held.
+    y must have M's layout (a scene's y goes with scene.arrays): the compiled core does not check bounds."""
+    size = offsets.py_func(M.berry.shape[0], M.n_dof, M.coupling.shape[0], M.moving, M.turning)[-1]
+    if np.shape(y) != (size,) or np.shape(contacts) != M.pair.shape:
+        raise ValueError(f"y, contacts: shapes {np.shape(y)}, {np.shape(contacts)} do not fit the model's layout "
+                         f"({size},), ({M.pair.shape[0]},) (moving {M.moving}, turning {M.turning}): pass a scene's "
+                         "y with scene.arrays")
     dy = np.zeros_like(y)
     rhs(t, t, y, dy, contacts, M, constant().arrays, held(accel)[0], workspace(M), np.arange(M.pair.shape[0]),
         M.pair.shape[0])

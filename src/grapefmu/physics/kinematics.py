@@ -69,6 +69,8 @@ def rachis_frame(y, M):
     """The rachis frame y holds (physics/layout.py): R from the orientation quaternion (normalised here: the
     integrator carries it only to its tolerance), ω turned into the rachis frame, ω_r = Rᵀ ω."""
     o_bv, o_b, o_om, o_rot = model_offsets(M)[:4]
+    if not M.moving:
+        return Frame(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     if not M.turning:
         return Frame(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, y[o_b], y[o_b + 1], y[o_b + 2],
                      y[o_bv], y[o_bv + 1], y[o_bv + 2], 0.0, 0.0, 0.0, 0.0)

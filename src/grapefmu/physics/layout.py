@@ -6,7 +6,10 @@ y = [q (D) | q̇ (D) | base velocity ḃ (3) | base displacement b (3) | base an
 
 ω and the orientation are there only when the rachis may turn (`ModelArrays.turning`, from the scene:
 model/excitation.Excitation.turns): a rachis that only translates keeps R = I, and its runs carry (and the
-integrator's error norm averages over) seven components fewer.
+integrator's error norm averages over) seven components fewer. ḃ and b are there only when it may move
+(`ModelArrays.moving`, Excitation.moves; turning implies moving): a rachis held still stays at the origin, and
+the runs of the paper's scenes carry 8 components rather than 14 (every stage, error and dense-output sum is
+over y).
 
 D is the number of degrees of freedom: one angle per planar berry, two per spherical one.
 The rachis motion follows the angles so that the head of y a step's dense output is sampled on
@@ -31,6 +34,7 @@ class Layout(NamedTuple):
     n: int
     d: int
     c: int
+    moving: bool
     turning: bool
     q: slice
     w: slice
@@ -46,14 +50,15 @@ class Layout(NamedTuple):
 
 
 @inline
-def offsets(n, d, c, turning):
-    """The first index of each block of y for N berries, D angles and C couplings: (base velocity, base
+def offsets(n, d, c, moving, turning):
+    """The first index of each block of y for N berries, D angles and C couplings, with the rachis' translation
+    (moving) and rotation (turning, which implies moving) or without: (base velocity, base
     displacement, base angular velocity, base orientation, hinge dissipation, coupling dissipation, contact
     dissipation, base work, size). The head that places the berries is y[:hinge dissipation]. The one
     definition of the layout (compiled and not)."""
     o_bv = 2 * d
-    o_b = o_bv + 3
-    o_om = o_b + 3
+    o_b = o_bv + 3 if moving else o_bv
+    o_om = o_b + 3 if moving else o_b
     o_rot = o_om + 3 if turning else o_om
     o_dh = o_rot + 4 if turning else o_rot
     o_dc = o_dh + n
@@ -62,16 +67,17 @@ def offsets(n, d, c, turning):
 
 
 @functools.cache  # every Solver, run and scene's layout_of asks for one: built once per shape
-def layout(n: int, d: int, c: int, turning: bool = False) -> Layout:
-    o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_w, size = offsets.py_func(n, d, c, turning)
-    return Layout(n, d, c, bool(turning), slice(0, d), slice(d, 2 * d), slice(o_bv, o_b), slice(o_b, o_om), slice(o_om, o_rot),
+def layout(n: int, d: int, c: int, moving: bool = True, turning: bool = False) -> Layout:
+    moving = bool(moving or turning)
+    o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_w, size = offsets.py_func(n, d, c, moving, turning)
+    return Layout(n, d, c, moving, bool(turning), slice(0, d), slice(d, 2 * d), slice(o_bv, o_b), slice(o_b, o_om), slice(o_om, o_rot),
                   slice(o_rot, o_dh), slice(o_dh, o_dc), slice(o_dc, o_contact), o_contact, o_w, size)
 
 
 @inline
 def model_offsets(M):
     """offsets() of a model's arrays (compiled code)."""
-    return offsets(M.berry.shape[0], M.n_dof, M.coupling.shape[0], M.turning)
+    return offsets(M.berry.shape[0], M.n_dof, M.coupling.shape[0], M.moving, M.turning)
 
 
 @inline
@@ -82,9 +88,10 @@ def model_head(M):
 
 
 def layout_of(scene) -> Layout:
-    """The layout of a scene's runs: with the rachis' ω and orientation when it may turn (Excitation.turns)."""
-    m = scene.model
-    return layout(m.n_berries, m.n_dof, len(m.couplings), scene.excitation.turns)
+    """The layout of a scene's runs: with the rachis' ḃ and b when it may move (Excitation.moves), its ω and
+    orientation when it may turn (Excitation.turns)."""
+    m, ex = scene.model, scene.excitation
+    return layout(m.n_berries, m.n_dof, len(m.couplings), ex.moves, ex.turns)
 
 
 def initial(lay: Layout, scene, extra: int = 0) -> np.ndarray:
@@ -98,8 +105,13 @@ def initial(lay: Layout, scene, extra: int = 0) -> np.ndarray:
     return y
 
 
-#: the rachis' orientation and angular velocity in a layout without them (a rachis that does not turn)
+#: the rachis' orientation, and its angular velocity or displacement, in a layout without them
 LEVEL, STILL = np.array([0.0, 0.0, 0.0, 1.0]), np.zeros(3)
+
+
+def displacement(lay: Layout, y) -> np.ndarray:
+    """The rachis' displacements b (..., 3), world frame, m, in states y (..., size)."""
+    return y[..., lay.base] if lay.moving else _constant(1, y.shape[:-1])
 
 
 def orientation(lay: Layout, y) -> np.ndarray:

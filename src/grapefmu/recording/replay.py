@@ -343,9 +343,11 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
                 compare(key, *recorded[key], run.angles[k], run.angular_velocities[k])
     else:
         from ..solver.solver import Solver
-        # the node's solver may be turned by its inputs (recordings before it could say "turning" had no turns)
-        turning = rec.metadata.get("turning") == "true"
-        solver = Solver(scene, turning=turning)
+        # the node's solver is driven by its inputs (metadata "turning"). Recordings before it could say so had
+        # no turns: their solver carried the rachis' translation alone, as Solver(scene) does for a scene that
+        # moves it; one that holds it still needs a driven solver to take the recorded accelerations
+        driven = rec.metadata.get("turning") == "true" or not scene.excitation.moves
+        solver = Solver(scene, driven=driven)
         applied, at = rec.topics.get("rachis/accel_applied", []), rec.positions.get("rachis/accel_applied", [])
         # each applied interval ends at a simulated time: `sim_time`, logged at the same stamp (its header is
         # the ROS clock), or the stamp itself in recordings made before the node stamped with its clock
@@ -364,7 +366,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
             t_end = seconds(sim.get(ns, ns))
             restarted = bisect.bisect_left(starts, at[k]) > bisect.bisect_left(starts, at[k - 1]) if k else False
             if restarted or t_end < solver.t:  # the node was reset (older recordings: its time went back)
-                solver = Solver(scene, turning=turning)
+                solver = Solver(scene, driven=driven)
             a, w = m.accel.linear, m.accel.angular
             set_omega = omega.get(k)
             solver.advance(t_end - solver.t, (a.x, a.y, a.z, w.x, w.y, w.z),

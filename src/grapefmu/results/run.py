@@ -14,7 +14,7 @@ import numpy as np
 from ..model.model import Scene
 from ..physics import observe as obs
 from ..physics.damage import detaching, fatigue, pair_bruise_thresholds
-from ..physics.layout import LEDGER_TERMS, Layout, angular_velocity, ledger, layout_of, orientation
+from ..physics.layout import LEDGER_TERMS, Layout, angular_velocity, displacement, ledger, layout_of, orientation
 from . import catalogue, trust
 from .contacts import ContactLog
 from .impacts import Impacts
@@ -55,7 +55,7 @@ class Run:
 
     @property
     def base_displacement(self) -> np.ndarray:
-        return self.y[:, self.layout.base]
+        return displacement(self.layout, self.y)
 
     @property
     def base_angular_velocity(self) -> np.ndarray:

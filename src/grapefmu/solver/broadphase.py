@@ -136,7 +136,7 @@ def quiet(y0, q, h, M, contacts, B, cfg, kin, bound, suspect):
         suspect[kk] = True
     base = 0.0
     turn = 0.0
-    if world:
+    if world and M.moving:
         base = math.sqrt(travel(q, h, o_b) ** 2 + travel(q, h, o_b + 1) ** 2 + travel(q, h, o_b + 2) ** 2)
         if M.turning:
             n0 = math.sqrt(y0[o_rot] ** 2 + y0[o_rot + 1] ** 2 + y0[o_rot + 2] ** 2 + y0[o_rot + 3] ** 2)

@@ -27,7 +27,7 @@ def _sample_bytes(n_berries: int, n_dof: int, n_couplings: int, n_pairs: int) ->
     from ..physics.layout import layout
     from .state import SAMPLED, recorder
 
-    ny = layout(n_berries, n_dof, n_couplings, turning=True).size  # the larger one
+    ny = layout(n_berries, n_dof, n_couplings, moving=True, turning=True).size  # the larger one
     return sum(a.nbytes for a in recorder(1, ny, n_pairs, 0)[:SAMPLED]) + n_pairs * CONTACT.itemsize
 
 

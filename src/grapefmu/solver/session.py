@@ -119,8 +119,8 @@ def island(template, n, n_dof, n_couplings, n_pairs, rows):
     An island is never refreshed (its Run is assembled from its recorder), so it shares the template's `now`."""
     P = template.model
     M = ModelArrays(np.zeros(n, BERRY), np.zeros(n_pairs, PAIR), np.zeros(n_couplings, COUPLING), P.obstacle,
-                    P.gravity, n_dof, P.turning)
-    ny = offsets(n, n_dof, n_couplings, P.turning)[-1]
+                    P.gravity, n_dof, P.moving, P.turning)
+    ny = offsets(n, n_dof, n_couplings, P.moving, P.turning)[-1]
     p, ring = template.tableau.p, template.state.book.ring
     memory, state = zeros(ny, n_pairs, n, p.shape[0], p.shape[1], ring.shape[1])
     scratch = recorder(rows, ny, n_pairs, max(n_pairs, 1) * 64)
@@ -222,6 +222,8 @@ def advance(s, dt, held, a, omega_set, omega, max_steps):
                 return REFUSED, 0.0, 0
     if not s.model.turning and (a[3] != 0.0 or a[4] != 0.0 or a[5] != 0.0 or (omega_set and (
             omega[0] != 0.0 or omega[1] != 0.0 or omega[2] != 0.0))):
+        return REFUSED, 0.0, 0
+    if not s.model.moving and (a[0] != 0.0 or a[1] != 0.0 or a[2] != 0.0):
         return REFUSED, 0.0, 0
     s.backup[:] = s.memory
     S = s.state

@@ -21,7 +21,7 @@ from ..model.model import Scene, off_axis
 from ..physics import observe as obs
 from ..physics.compiled import entry
 from ..physics.excitation import ACCEL_COMPONENTS, base_accel
-from ..physics.layout import LEDGER_TERMS, angular_velocity, initial, ledger, layout_of, orientation
+from ..physics.layout import LEDGER_TERMS, angular_velocity, displacement, initial, ledger, layout_of, orientation
 from ..results import catalogue
 from ..results.contacts import ContactLog
 from ..results.impacts import Impacts
@@ -62,11 +62,12 @@ class Solver:
     def __init__(self, scene: Scene, *, method: str | None = None, rtol: float | None = None,
                  atol: float | None = None, fixed_step: float | None = None, max_steps: int = 10_000_000,
                  skin: float | None = None, locate: bool | None = None, t_start: float = 0.0,
-                 turning: bool = False):
-        """turning: the rachis may be turned by advance()'s inputs (a face: the FMU, the ROS node), whatever the
-        scene's excitation does; otherwise it turns only if the scene turns it (Excitation.turns)."""
+                 driven: bool = False):
+        """driven: advance()'s inputs may move and turn the rachis (a face: the FMU, the ROS node), whatever the
+        scene's excitation does; otherwise it moves and turns only as far as the scene does (Excitation.moves,
+        .turns), and a rachis the scene holds still is left out of the state."""
         s = scene.solver
-        scene = scene.free_to_turn() if turning else scene
+        scene = scene.driven() if driven else scene
         self.scene = scene
         self.method = method or s.method
         if self.method not in ("event", "paper"):
@@ -184,7 +185,7 @@ class Solver:
             m, lay, y = self.model, self.layout, self.state.physical.y
             observation, accel, in_contact = self._outputs[1]
             snap = self._snapshot = catalogue.Snapshot(
-                self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel, y[None, lay.base],
+                self.state.physical.t, y[None, lay.q], y[None, lay.w], in_contact, accel, displacement(lay, y[None]),
                 angular_velocity(lay, y[None]), orientation(lay, y[None]), np.zeros((1, len(LEDGER_TERMS))),
                 self.state.book.totals, observation, m.obstacle_pairs)
         ledger(self.layout, self.state.physical.y, out=snap.ledger[0])
@@ -278,13 +279,17 @@ class Solver:
             self._fail(status)
 
     def _check_input(self, a: tuple[float, ...], omega: tuple[float, float, float]) -> None:
-        """Refuse advance()'s input, naming what is wrong: a value out of its bounds (model/excitation.py), a turn
-        of a rachis that does not turn, or, in a planar scene, a turn about another axis than the rachis' y."""
+        """Refuse advance()'s input, naming what is wrong: a value out of its bounds (model/excitation.py), a move
+        or turn of a rachis that does not move or turn, or, in a planar scene, a turn about another axis than the
+        rachis' y."""
         _held_accel(a)
         _angular_velocity(omega)
         if not self.layout.turning and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
             raise SolverError("base_accel, angular_velocity: this solver's rachis does not turn (its scene does "
-                              "not turn it); build it with Solver(scene, turning=True) to drive rotation as an input")
+                              "not turn it); build it with Solver(scene, driven=True) to drive rotation as an input")
+        if not self.layout.moving and (a[0] or a[1] or a[2]):
+            raise SolverError("base_accel: this solver's rachis does not move (its scene holds it still); build it "
+                              "with Solver(scene, driven=True) to drive it as an input")
         n = self._plane_normal
         if n is not None and (off_axis(a[3:], n) or off_axis(omega, n)):
             name = "base_accel" if off_axis(a[3:], n) else "angular_velocity"
