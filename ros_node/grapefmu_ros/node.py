@@ -181,7 +181,7 @@ class SimulatorNode(Node):
                 self._restart_clock()
 
     def _reset_sim(self):
-        self.solver = Solver(self.scene, driven=True)  # whatever the scene does, inputs may turn the rachis
+        self.solver = Solver(self.scene, driven=True)  # whatever the scene does, inputs may move and turn the rachis
         self.accel = (0.0,) * 6  # held: ACCEL_COMPONENTS, world frame
         self.omega = None        # ω (world, rad/s) an input gave, set at the start of the next interval
         self.last_stamp = -math.inf

@@ -70,8 +70,9 @@ def offsets(n, d, c, moving, turning):
 def layout(n: int, d: int, c: int, moving: bool = True, turning: bool = False) -> Layout:
     moving = bool(moving or turning)
     o_bv, o_b, o_om, o_rot, o_dh, o_dc, o_contact, o_w, size = offsets.py_func(n, d, c, moving, turning)
-    return Layout(n, d, c, moving, bool(turning), slice(0, d), slice(d, 2 * d), slice(o_bv, o_b), slice(o_b, o_om), slice(o_om, o_rot),
-                  slice(o_rot, o_dh), slice(o_dh, o_dc), slice(o_dc, o_contact), o_contact, o_w, size)
+    return Layout(n, d, c, moving, bool(turning), slice(0, d), slice(d, 2 * d), slice(o_bv, o_b), slice(o_b, o_om),
+                  slice(o_om, o_rot), slice(o_rot, o_dh), slice(o_dh, o_dc), slice(o_dc, o_contact), o_contact, o_w,
+                  size)
 
 
 @inline

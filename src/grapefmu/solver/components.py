@@ -101,7 +101,8 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
             y[:, lay.d_coupling.start + coup_index[(members[c.i], members[c.j])]] = run.y[:, sl.d_coupling.start + k]
         y[:, lay.d_contact] += run.y[:, sl.d_contact]
         y[:, lay.work] += run.y[:, sl.work]
-        for block in ("base_velocity", "base", "base_angular_velocity", "base_orientation")[: 4 if lay.turning else 2 if lay.moving else 0]:
+        blocks = ("base_velocity", "base", "base_angular_velocity", "base_orientation")
+        for block in blocks[: 4 if lay.turning else 2 if lay.moving else 0]:
             y[:, getattr(lay, block)] = run.y[:, getattr(sl, block)]
         body = members + list(range(m.n_berries, m.n_berries + len(m.obstacles)))  # group's body -> scene's
         glob = np.array([pair_index[(body[p.i], body[p.j])] for p in run.scene.model.pairs], dtype=int)
