@@ -93,19 +93,19 @@ CASES = {  # the scenes the bound is tested on beyond the benchmark's, each for 
 HELD = (2.0, 0.0, 3.0, 0.0, 0.0, 0.0)
 
 
-@pytest.mark.parametrize("name, turning, held", [
+@pytest.mark.parametrize("name, driven, held", [
     ("paper collision", False, False), ("pick and place", False, False), ("coupled chirp", False, False), ("vertical chirp", False, False),
     ("spherical tilt", False, False), ("cluster", False, False), ("paper collision", True, False),
     ("paper collision", True, True), ("turned pick and place", True, False), ("spinning", True, False)])
-def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, turning, held):
+def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, driven, held):
     """A step whose tensions cannot pass their peaks is not sampled (sampling.tensions_bounded). On every step of the
     first 0.6 s of a run (at most 400), the bound is tested against the tension the observation computes
     (physics/observe.py) at 400 points of the step's dense output: told a peak just below a berry's largest tension
-    there, it must say the step can pass it. The cases reach its branches: a face's solver (turning: its state carries
+    there, it must say the step can pass it. The cases reach its branches: a face's solver (driven: its state carries
     the rachis' orientation and ω), a held input, chirps, a table, a coupling, spherical berries, a turned rachis and a
     spinning one (for which it must never hold)."""
     sc = CASES[name]() if name in CASES else build(bench_scenes()[name])
-    s = Solver(sc, rtol=1e-6, atol=1e-8, driven=turning)
+    s = Solver(sc, rtol=1e-6, atol=1e-8, driven=driven)
     S, M = s.state, s.M
     if held:
         s.advance(1e-4, HELD)
@@ -145,10 +145,11 @@ def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, turning,
         assert bounded > 0, "the bound never held: its branch was not tested"
 
 
-@pytest.mark.parametrize("turning", [False, True])
-def test_most_quiet_steps_of_the_paper_collision_are_spared(turning):
+@pytest.mark.parametrize("driven", [False, True])
+def test_most_quiet_steps_of_the_paper_collision_are_spared(driven):
     """The loop leaves out the booking pass of most of its quiet steps (stats: spared_steps), for `simulate` and for a
-    face's solver, which is built to turn; only a quiet step can be spared in a scene with pairs."""
-    run = Solver(build(bench_scenes()["paper collision"]), rtol=1e-6, atol=1e-8, driven=turning).run()
+    face's solver, which is driven (it carries the rachis' motion and turn); only a quiet step can be spared in a
+    scene with pairs."""
+    run = Solver(build(bench_scenes()["paper collision"]), rtol=1e-6, atol=1e-8, driven=driven).run()
     st = run.stats
     assert st["quiet_steps"] / 2 < st["spared_steps"] <= st["quiet_steps"], st
