@@ -123,8 +123,8 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
         ongoing.append(rec[run.impacts.ongoing])
     stats = dict(runs[0].stats)
     for key in ("steps", "rejected", "rhs_evaluations", "switches", "impacts", "zeno_guard_activations",
-                "degrees_of_freedom", "candidate_pairs", "near_list_rebuilds", "quiet_steps", "spared_steps", "wall_time", "segments",
-                "islands_formed", "island_rollbacks"):
+                "degrees_of_freedom", "candidate_pairs", "near_list_rebuilds", "quiet_steps", "spared_steps",
+                "wall_time", "segments", "islands_formed", "island_rollbacks"):
         if all(key in r.stats for r in runs):
             stats[key] = sum(r.stats[key] for r in runs)
     if all("near_pairs_mean" in r.stats for r in runs):
