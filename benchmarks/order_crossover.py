@@ -5,11 +5,14 @@ error = max |angles − reference| over the run, the reference being the same sc
 (DOP853, atol 1e-15); cost = the fastest of REPEATS wall times, the runs of both pairs interleaved. Printed
 per scene: the cost at 1e-6 and 1e-10 rad (log-log interpolation between rtols), steps and RHS evaluations,
 and per rtol the ratio of DOP853's cost to DOPRI5's at the error DOP853 reached (< 1: DOP853 pays).
-solver.DOP853_BELOW is set from these ratios. `clusters N ...` instead: the Scale section's pick-and-place cluster
+solver.DOP853_BELOW and DOP853_BELOW_FEW are set from these ratios (DOP853 steps at solver.DOP853_TOLERANCE
+times the rtol and atol given, as it does by default). `clusters N ...` instead: the Scale section's pick-and-place cluster
 of N berries at rtol 1e-6 under each pair as `simulate` runs it (islands from 100 berries), wall time (the fastest of
-3, interleaved) and error against the scene at rtol 1e-10 (bench/scale.error).
+3, interleaved) and error against the scene at rtol 1e-10 (bench/scale.error). `advance` instead: the paper
+collision advanced 1 ms at a time for 2 s by a face's solver (driven, a held input that changes every call) under
+each pair at rtol 1e-6, wall time (the fastest of 5, interleaved), steps and right-hand sides.
 
-    PYTHONPATH=src python benchmarks/order_crossover.py [scene ... | clusters N ...]
+    PYTHONPATH=src python benchmarks/order_crossover.py [scene ... | clusters N ... | advance]
 """
 from __future__ import annotations
 
@@ -25,12 +28,16 @@ from grapefmu.solver import solver as sv
 
 RTOLS = [10.0 ** -k for k in range(4, 13)]
 REPEATS = 5
-PAIRS = {"DOPRI5": 0.0, "DOP853": math.inf}  # DOP853_BELOW that forces each pair
+PAIRS = {"DOPRI5": 0.0, "DOP853": math.inf}  # DOP853_BELOW and DOP853_BELOW_FEW that force each pair
 SCENES = ("paper collision", "free swing", "shaken stiff pair")
 
 
+def force(pair):
+    sv.DOP853_BELOW = sv.DOP853_BELOW_FEW = PAIRS[pair]
+
+
 def run(scene, pair, rtol, atol):
-    sv.DOP853_BELOW = PAIRS[pair]
+    force(pair)
     t = time.perf_counter()
     r = simulate(scene, rtol=rtol, atol=atol, output_interval=1e-3)
     return time.perf_counter() - t, r
@@ -49,7 +56,7 @@ def at_error(errors, costs, target):
 
 def clusters(sizes, rtol=1e-6):
     from grapefmu.bench.scale import error, scene
-    kept = sv.DOP853_BELOW
+    kept = sv.DOP853_BELOW, sv.DOP853_BELOW_FEW
     try:
         for n in sizes:
             sc, best, err = scene("cluster", n, rtol), {}, {}
@@ -59,17 +66,39 @@ def clusters(sizes, rtol=1e-6):
                     if rep:
                         best[p] = min(best.get(p, math.inf), w)
             for p in PAIRS:
-                sv.DOP853_BELOW = PAIRS[p]
+                force(p)
                 err[p] = error("cluster", n, rtol)
             print(f"cluster of {n}, rtol {rtol:g}: " + ", ".join(
                 f"{p} {1e3 * best[p]:.1f} ms per simulated s, error {err[p]:.1e} rad" for p in PAIRS))
     finally:
-        sv.DOP853_BELOW = kept
+        sv.DOP853_BELOW, sv.DOP853_BELOW_FEW = kept
+
+
+def advance(rtol=1e-6, repeats=5):
+    from grapefmu.solver.solver import Solver
+    sc = build(bench_scenes()["paper collision"])
+    kept = sv.DOP853_BELOW, sv.DOP853_BELOW_FEW
+    best, work = {}, {}
+    try:
+        for _ in range(repeats):
+            for p in PAIRS:
+                force(p)
+                s = Solver(sc, rtol=rtol, atol=rtol * 1e-2, driven=True)
+                t = time.perf_counter()
+                for k in range(2000):
+                    s.advance(1e-3, (0.5 * math.sin(0.01 * k), 0.0, 0.3, 0.0, 0.0, 0.0))
+                best[p] = min(best.get(p, math.inf), time.perf_counter() - t)
+                work[p] = (s.stats["steps"], s.stats["rhs_evaluations"])
+    finally:
+        sv.DOP853_BELOW, sv.DOP853_BELOW_FEW = kept
+    print(f"paper collision, 2000 advance(1 ms), driven, rtol {rtol:g}: " + ", ".join(
+        f"{p} {1e3 * best[p]:.2f} ms ({work[p][0]} steps, {work[p][1]} RHS)" for p in PAIRS)
+        + f"; DOP853/DOPRI5 {best['DOP853'] / best['DOPRI5']:.2f}")
 
 
 def main(names):
     scenes = bench_scenes()
-    kept = sv.DOP853_BELOW
+    kept = sv.DOP853_BELOW, sv.DOP853_BELOW_FEW
     try:
         for name in names:
             sc = build(scenes[name])
@@ -101,11 +130,13 @@ def main(names):
                     cells.append(f"{p} {at_error(e, c, target) * 1e3:8.2f} ms")
                 print(f"cost at {target:.0e} rad: " + ", ".join(cells))
     finally:
-        sv.DOP853_BELOW = kept
+        sv.DOP853_BELOW, sv.DOP853_BELOW_FEW = kept
 
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["clusters"]:
         clusters([int(n) for n in sys.argv[2:]])
+    elif sys.argv[1:2] == ["advance"]:
+        advance()
     else:
         main(sys.argv[1:] or SCENES)

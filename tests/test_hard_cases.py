@@ -90,19 +90,20 @@ def test_grazing_contact_inside_one_step_is_found():
 
 
 @pytest.mark.parametrize("rtol", [1e-6, 1e-7])
-def test_a_graze_just_after_a_steps_start_is_found(monkeypatch, rtol):
+def test_a_graze_just_after_a_steps_start_is_found(rtol):
     """The grazing scene's third touch is 0.5 µm deep and peaks 6.5 ms after the start of a 56 ms DOP853 step, whose
     start is its largest sample of δ: the samples' rates (events.graze_possible) must find it, against the
-    reference's three impacts. DOP853 is forced at these tolerances (the default steps them with DOPRI5), where
-    it used to book two."""
+    reference's three impacts. DOP853 steps at rtol (asked rtol / DOP853_TOLERANCE) 1e-6 and 1e-7 here, where it
+    used to book two."""
     from grapefmu.bench.scenes import bench_scenes, build
     from grapefmu.solver import solver as solver_module
     from grapefmu.solver.tableau import DOP853
 
-    monkeypatch.setattr(solver_module, "DOP853_BELOW", math.inf)
     sc = build(bench_scenes()["grazing"])
-    assert solver_module.Solver(sc, rtol=rtol).tableau is DOP853
-    run = simulate(sc, rtol=rtol, atol=rtol / 100)
+    asked = rtol / solver_module.DOP853_TOLERANCE
+    solver = solver_module.Solver(sc, rtol=asked, atol=asked / 100)
+    assert solver.tableau is DOP853 and solver.config["rtol"][0] == pytest.approx(rtol)
+    run = simulate(sc, rtol=asked, atol=asked / 100)
     ref = simulate(sc, method="reference", rtol=1e-11, atol=1e-13)
     assert ref.collision_count == 3
     assert run.collision_count == 3
