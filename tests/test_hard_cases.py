@@ -93,8 +93,8 @@ def test_grazing_contact_inside_one_step_is_found():
 def test_a_graze_just_after_a_steps_start_is_found(rtol):
     """The grazing scene's third touch is 0.5 µm deep and peaks 6.5 ms after the start of a 56 ms DOP853 step, whose
     start is its largest sample of δ: the samples' rates (events.graze_possible) must find it, against the
-    reference's three impacts. DOP853 steps at rtol (asked rtol / DOP853_TOLERANCE) 1e-6 and 1e-7 here, where it
-    used to book two."""
+    reference's three impacts. The run asks rtol / DOP853_TOLERANCE, so that DOP853 steps at rtol 1e-6 and 1e-7,
+    where it used to book two."""
     from grapefmu.bench.scenes import bench_scenes, build
     from grapefmu.solver import solver as solver_module
     from grapefmu.solver.tableau import DOP853

@@ -15,19 +15,19 @@ from grapefmu.solver.tableau import DOP853, DOPRI5
 
 def test_the_pair_follows_the_tolerance_and_the_scene_and_dop853_is_asked_a_third_of_it():
     """The rule of solver.tableau_for, and the tolerances each pair is asked (Solver.config) against those reported."""
-    pair = build(bench_scenes()["paper collision"])
+    two = build(bench_scenes()["paper collision"])
     cluster = scale_scene("cluster", solver_module.FEW_BERRIES)
-    for scene, rtol, tableau in [(pair, 1e-5, DOPRI5), (pair, 1e-6, DOP853), (pair, 1e-10, DOP853),
+    for scene, rtol, tableau in [(two, 1e-5, DOPRI5), (two, 1e-6, DOP853), (two, 1e-10, DOP853),
                                  (cluster, 1e-6, DOPRI5), (cluster, 1e-7, DOPRI5), (cluster, 1e-8, DOP853)]:
         s = Solver(scene, rtol=rtol, atol=rtol / 100)
         assert s.tableau is tableau, (scene.model.n_berries, rtol)
         k = solver_module.DOP853_TOLERANCE if tableau is DOP853 else 1.0
         assert (s.config["rtol"][0], s.config["atol"][0]) == pytest.approx((k * rtol, k * rtol / 100), rel=1e-15)
         assert s.rtol == rtol  # what a run's stats report: the tolerance asked
-    assert Solver(pair, rtol=1e-6, fixed_step=1e-3).tableau is DOPRI5  # a fixed step has no tolerance to match
+    assert Solver(two, rtol=1e-6, fixed_step=1e-3).tableau is DOPRI5  # a fixed step has no tolerance to match
     # a face's solver: its communication points cut the steps, as a cluster's onsets do
-    assert Solver(pair, rtol=1e-6, driven=True).tableau is DOPRI5
-    assert Solver(pair, rtol=1e-8, driven=True).tableau is DOP853
+    assert Solver(two, rtol=1e-6, driven=True).tableau is DOPRI5
+    assert Solver(two, rtol=1e-8, driven=True).tableau is DOP853
 
 
 @pytest.mark.parametrize("rtol", [1e-6, 1e-7])
