@@ -12,6 +12,7 @@ from grapefmu.bench.scenes import bench_scenes, build
 from grapefmu.physics import observe
 from grapefmu.physics.excitation import base_accel
 from grapefmu.physics.kinematics import kinematics
+from grapefmu.solver import solver as solver_module
 from grapefmu.solver.broadphase import samples_for
 from grapefmu.solver.sampling import tensions_bounded
 from grapefmu.solver.solver import Solver
@@ -93,19 +94,29 @@ CASES = {  # the scenes the bound is tested on beyond the benchmark's, each for 
 HELD = (2.0, 0.0, 3.0, 0.0, 0.0, 0.0)
 
 
+#: the rtol below which each pair steps every case (solver.DOP853_BELOW and DOP853_BELOW_FEW): the bound must hold on
+#: either pair's dense output, and DOPRI5's shorter steps reach branches DOP853's pass over
+PAIRS = {"DOPRI5": 0.0, "DOP853": 1.0}
+
+
+@pytest.mark.parametrize("pair", PAIRS)
 @pytest.mark.parametrize("name, driven, held", [
     ("paper collision", False, False), ("pick and place", False, False), ("coupled chirp", False, False), ("vertical chirp", False, False),
     ("spherical tilt", False, False), ("cluster", False, False), ("paper collision", True, False),
     ("paper collision", True, True), ("turned pick and place", True, False), ("spinning", True, False)])
-def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, driven, held):
+def test_the_tension_bound_is_never_below_the_tension_on_the_step(name, driven, held, pair, monkeypatch):
     """A step whose tensions cannot pass their peaks is not sampled (sampling.tensions_bounded). On every step of the
-    first 0.6 s of a run (at most 400), the bound is tested against the tension the observation computes
-    (physics/observe.py) at 400 points of the step's dense output: told a peak just below a berry's largest tension
-    there, it must say the step can pass it. The cases reach its branches: a face's solver (driven: its state carries
-    the rachis' orientation and ω), a held input, chirps, a table, a coupling, spherical berries, a turned rachis and a
-    spinning one (for which it must never hold)."""
+    first 0.6 s of a run (at most 400), with each pair, the bound is tested against the tension the observation
+    computes (physics/observe.py) at 400 points of the step's dense output: told a peak just below a berry's largest
+    tension there, it must say the step can pass it. The cases reach its branches: a face's solver (driven: its state
+    carries the rachis' orientation and ω), a held input, chirps, a table, a coupling, spherical berries, a turned
+    rachis and a spinning one (for which it must never hold). benchmarks/peak_bound_mutants.py checks that each wrong
+    bound it names fails here."""
+    monkeypatch.setattr(solver_module, "DOP853_BELOW", PAIRS[pair])
+    monkeypatch.setattr(solver_module, "DOP853_BELOW_FEW", PAIRS[pair])
     sc = CASES[name]() if name in CASES else build(bench_scenes()[name])
     s = Solver(sc, rtol=1e-6, atol=1e-8, driven=driven)
+    assert s.tableau is getattr(solver_module, pair)
     S, M = s.state, s.M
     if held:
         s.advance(1e-4, HELD)
