@@ -39,13 +39,8 @@ SKIN_FRACTION = 0.5
 #: The event method's pair: DOP853 below DOP853_BELOW, or below DOP853_BELOW_FEW for a scene of fewer than
 #: FEW_BERRIES berries run whole (not driven: a face's communication points cut its steps); DOPRI5 otherwise.
 #: DOP853 is asked DOP853_TOLERANCE times the tolerances (rtol and atol), where its error matches DOPRI5's at the
-#: asked ones, so a run's accuracy follows its rtol whichever pair steps it. benchmarks/order_crossover.py (both
-#: pairs forced, rtol 1e-4..1e-12, error against DOP853 at rtol 1e-13): at the same rtol DOP853's error is 0.2..6
-#: times DOPRI5's, about 3 on the two-berry scenes; at equal error it takes 0.2..0.86 of DOPRI5's time from rtol
-#: 1e-8 down on every scene, and 0.62..0.97 at 1e-6 rad on the scenes of two or three berries; on the
-#: pick-and-place cluster at rtol 1e-6 0.67 of it with 5 berries, 0.93 with 10 (for twice the error), 1.02 with
-#: 20 and 1.3..1.9 with 100 and 300, where onsets and island windows cut its steps; and 1.3..1.4 times DOPRI5's time
-#: for the paper collision advanced 1 ms at a time at rtol 1e-6 (docs/solver.md, "Order to match the tolerance").
+#: asked ones, so a run's accuracy follows its rtol whichever pair steps it. The measurements behind each number:
+#: docs/solver.md, "Order to match the tolerance" (benchmarks/order_crossover.py).
 DOP853_BELOW = 1e-7
 DOP853_BELOW_FEW = 1e-5
 FEW_BERRIES = 10
