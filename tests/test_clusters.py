@@ -15,6 +15,7 @@ from grapefmu.model import model as model_module
 from grapefmu.model.model import SolverSettings
 from grapefmu.scenefile import load_scene, scene_from_dict
 from grapefmu.physics.kinematics import positions
+from grapefmu.results.records import COUNTERS, WORK
 from grapefmu.solver.api import simulate
 from grapefmu.solver.components import groups, sub_scene
 from grapefmu.solver import session as ses
@@ -139,6 +140,29 @@ def test_berries_that_cannot_touch_give_exactly_the_single_pendulum():
         np.testing.assert_array_equal(run.angles[:, 2 * i: 2 * i + 2], alone.angles)
         np.testing.assert_array_equal(run.pedicel_tension[:, i], alone.pedicel_tension[:, 0])
     assert run.ledger_error() < 1e-7
+
+
+def test_groups_run_apart_report_the_work_of_both():
+    """Every work counter the loop keeps (results.records.COUNTERS) reaches Run.stats and the summary under its name,
+    and a scene run as independent groups reports the sum of its groups' work (components.merge), near pairs per step
+    weighted by steps: a counter added to COUNTERS needs no edit elsewhere."""
+    dual = load_scene(SCENES / "paper" / "test3.toml")
+    m = dual.model
+    far = tuple(replace(b, name=f"{b.name}_far", hinge_x=b.hinge_x + 0.5) for b in m.berries)
+    pairs = (*m.pairs, *(ContactPair(p.i + 2, p.j + 2, p.law) for p in m.pairs))
+    sc = replace(dual, model=Model(m.berries + far, pairs, (), m.gravity), angles=dual.angles * 2,
+                 angular_velocities=dual.angular_velocities * 2)
+    assert groups(sc.model) == [[0, 1], [2, 3]]
+    run = simulate(sc, t_end=1.0)
+    parts = [simulate(sub_scene(sc, members), t_end=1.0) for members in groups(sc.model)]
+    assert run.stats["groups"] == 2 and all(p.stats["switches"] > 0 for p in parts)
+    for name in (*WORK, "impacts", "degrees_of_freedom", "candidate_pairs"):
+        assert run.stats[name] == sum(p.stats[name] for p in parts), name
+    assert run.stats["near_pairs_mean"] == pytest.approx(
+        sum(p.stats["near_pairs_mean"] * p.stats["steps"] for p in parts) / run.stats["steps"], rel=1e-12)
+    summary = run.summary()
+    assert {name: summary[name] for name in WORK} == {name: run.stats[name] for name in WORK}
+    assert set(WORK) | {"near_pairs_sum"} == set(COUNTERS.names)
 
 
 def test_planar_row_of_two_is_the_dual_system():

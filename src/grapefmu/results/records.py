@@ -1,5 +1,5 @@
-"""The records a run reports, as the compiled solver writes them: finished impacts, and the totals of
-what the run has done to the berries so far (every face reports the same totals)."""
+"""The records a run reports, as the compiled solver writes them: finished impacts, the totals of what the
+run has done to the berries so far (every face reports the same totals), and the solver's work counters."""
 from __future__ import annotations
 
 import math
@@ -14,6 +14,13 @@ IMPACT = np.dtype([("pair", "i8"), ("onset", "f8"), ("end", "f8"), ("approach_sp
 #: and the largest contact force and pedicel tension (refined on the dense output)
 TOTALS = np.dtype([("collision_count", "i8"), ("bruising_impacts", "i8"), ("berries_over_detachment_force", "i8"),
                    ("peak_contact_force", "f8"), ("peak_pedicel_tension", "f8")])
+#: a run's work as the compiled loop counts it: Run.stats holds each under its name, near_pairs_sum as
+#: near_pairs_mean (near pairs per step)
+COUNTERS = np.dtype([("steps", "i8"), ("rejected", "i8"), ("rhs_evaluations", "i8"), ("switches", "i8"),
+                     ("zeno_guard_activations", "i8"), ("near_pairs_sum", "i8"), ("near_list_rebuilds", "i8"),
+                     ("quiet_steps", "i8"), ("spared_steps", "i8")])
+#: the counters Run.stats holds as counted (they add up over parts of a scene run apart)
+WORK = tuple(f for f in COUNTERS.names if f != "near_pairs_sum")
 #: TOTALS over parts of a scene (islands, groups): the counts add up, the peaks take the largest
 COUNTS = tuple(f for f in TOTALS.names if TOTALS[f].kind == "i")
 PEAKS = tuple(f for f in TOTALS.names if TOTALS[f].kind == "f")

@@ -18,6 +18,7 @@ from ..physics.layout import LEDGER_TERMS, Layout, angular_velocity, displacemen
 from . import catalogue, trust
 from .contacts import ContactLog
 from .impacts import Impacts
+from .records import WORK
 
 
 @dataclass
@@ -227,9 +228,8 @@ class Run:
             unit("mean_dissipated_per_berry", "J"): float(per_berry.mean()),
             "max_active_pairs": int(self.active_pairs.max()) if len(self.t) else 0,
             **{k: v for k, v in self.stats.items() if k in (
-                "method", "steps", "rejected", "rhs_evaluations", "zeno_guard_activations",
-                "degrees_of_freedom", "candidate_pairs", "near_pairs_mean", "near_list_rebuilds", "quiet_steps", "spared_steps",
-                "islands_formed", "island_rollbacks")},
+                "method", *WORK, "degrees_of_freedom", "candidate_pairs", "near_pairs_mean", "islands_formed",
+                "island_rollbacks")},
             **{unit(k, "s"): self.stats[k] for k in ("wall_time", "compile_time") if k in self.stats},
             "warnings": trust.warnings(self),  # one line each where the results cannot be trusted
         }

@@ -19,7 +19,7 @@ from ..physics.forces import CONTACT
 from ..physics.layout import layout_of
 from ..results.contacts import CHANGE, ContactLog
 from ..results.impacts import Impacts
-from ..results.records import COUNTS, PEAKS, TOTALS, concat
+from ..results.records import COUNTS, PEAKS, TOTALS, WORK, concat
 from ..results.run import Run
 
 
@@ -122,9 +122,8 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
         finished.append(rec[~run.impacts.ongoing])
         ongoing.append(rec[run.impacts.ongoing])
     stats = dict(runs[0].stats)
-    for key in ("steps", "rejected", "rhs_evaluations", "switches", "impacts", "zeno_guard_activations",
-                "degrees_of_freedom", "candidate_pairs", "near_list_rebuilds", "quiet_steps", "spared_steps",
-                "wall_time", "segments", "islands_formed", "island_rollbacks"):
+    for key in (*WORK, "impacts", "degrees_of_freedom", "candidate_pairs", "wall_time", "segments", "islands_formed",
+                "island_rollbacks"):
         if all(key in r.stats for r in runs):
             stats[key] = sum(r.stats[key] for r in runs)
     if all("near_pairs_mean" in r.stats for r in runs):

@@ -311,7 +311,7 @@ def switch_pair(p, new_mode, t, delta_dot, M, contacts, Bk, cfg, impacts, cursor
     if t - ring[p, pos] < cfg.zeno_window:
         c.smooth = True
         bp.smooth_until = t + cfg.zeno_window
-        Bk.counters[0].zeno_activations += 1
+        Bk.counters[0].zeno_guard_activations += 1
 
 
 @inline

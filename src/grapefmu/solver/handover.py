@@ -14,12 +14,11 @@ from numba import literal_unroll
 
 from ..physics.compiled import inline, jit
 from ..physics.layout import model_offsets
-from ..results.records import COUNTS, PEAKS
+from ..results.records import COUNTERS, COUNTS, PEAKS
 from .session import restart
-from .state import BOOK_COUNTERS
 
-#: the work counters' names (BOOK_COUNTERS), for literal_unroll
-WORK = tuple(BOOK_COUNTERS.names)
+#: the work counters' names, for literal_unroll
+COUNTED = tuple(COUNTERS.names)
 
 
 @jit
@@ -96,7 +95,7 @@ def form(s, P, G, members, dofs, pairs, couplings, local, scene_offsets, t, grid
     tot.collision_count, tot.bruising_impacts, tot.berries_over_detachment_force = 0, 0, 0
     tot.peak_contact_force, tot.peak_pedicel_tension = 0.0, -np.inf
     cnt = S.book.counters[0]
-    for f in literal_unroll(WORK):
+    for f in literal_unroll(COUNTED):
         cnt[f] = 0
     inp = S.input[0]
     inp.held = False
@@ -203,12 +202,12 @@ def retire(s, G, scene_offsets, y, accel, totals, later, ledger_later, counters)
     """Island session s's state back into the scene's G (scatter) and its last samples into the run's arrays
     (flush). What it closed with holds for every later sample: its totals go into `later` and its energy integrals
     (contacts, work) into `ledger_later`, at the sample after its last (the run sums and raises them over the samples
-    after, Islands._assemble). Its work counters are added to `counters` ((1,) BOOK_COUNTERS). Returns its contact
+    after, Islands._assemble). Its work counters are added to `counters` ((1,) COUNTERS). Returns its contact
     changes (a copy; each at its sample of the run's grid) and its steps."""
     flush(s, scene_offsets, y, accel, totals)
     scatter(s, G)
     done, c = s.state.book.counters[0], counters[0]
-    for f in literal_unroll(WORK):
+    for f in literal_unroll(COUNTED):
         c[f] += done[f]
     S, M, R = s.state, s.model, s.scratch
     o_contact, o_work = model_offsets(M)[6:8]

@@ -166,7 +166,7 @@ class Islands:
         for f in PEAKS:
             self.later[f] = -np.inf
         self.ledger_later = np.zeros((n + 1, 2))
-        self.counters = np.zeros(1, dtype=st.BOOK_COUNTERS)
+        self.counters = np.zeros(1, dtype=st.COUNTERS)
         self.segments: list[_Segment] = []
         self.formed = self.rollbacks = self.berry_steps = 0
 

@@ -17,9 +17,9 @@ from ..physics.compiled import inline, jit
 from ..physics.excitation import INPUT
 from ..physics.forces import CONTACT
 from ..results.contacts import CHANGE
-from ..results.records import IMPACT, TOTALS
+from ..results.records import COUNTERS, IMPACT, TOTALS
 
-__all__ = ["BOOK_COUNTERS", "BOOK_PAIR", "CONFIG", "CONTACT", "IMPACT", "INPUT", "TOTALS", "Book", "BroadPhase",
+__all__ = ["BOOK_PAIR", "CONFIG", "COUNTERS", "CONTACT", "IMPACT", "INPUT", "TOTALS", "Book", "BroadPhase",
            "Integrator", "Physical", "Recorder", "SolverState", "assign", "copy", "flatten", "recorder", "unflatten",
            "zeros"]
 
@@ -32,10 +32,6 @@ CONFIG = np.dtype([("rtol", "f8"), ("atol", "f8"), ("fixed_step", "f8"), ("zeno_
 #: last accepted step's error norm, which step-size control's PI term reads (0 before the first)
 CLOCK = np.dtype([("h", "f8"), ("t_prev", "f8"), ("h_last", "f8"), ("break_index", "i8"), ("h_contact", "f8"),
                   ("err_last", "f8"), ("after_onset", "?")])
-#: how much work the solver did
-BOOK_COUNTERS = np.dtype([("steps", "i8"), ("rejected", "i8"), ("rhs_evaluations", "i8"), ("switches", "i8"),
-                          ("zeno_activations", "i8"), ("near_pairs_sum", "i8"), ("near_list_rebuilds", "i8"),
-                          ("quiet_steps", "i8"), ("spared_steps", "i8")])
 #: per pair: the impact going on (valid while the pair is in contact), running totals, the Zeno guard
 BOOK_PAIR = np.dtype([("onset", "f8"), ("approach_speed", "f8"), ("impact_peak", "f8"), ("impact_peak_time", "f8"),
                       ("impulse_at_onset", "f8"), ("dissipated_at_onset", "f8"), ("bruising", "?"),
@@ -70,7 +66,7 @@ class Integrator(NamedTuple):
 class Book(NamedTuple):
     """Impacts, peaks, per-pair integrals and the Zeno guard, kept while stepping so nothing is recomputed."""
 
-    counters: np.ndarray       # (1,) BOOK_COUNTERS
+    counters: np.ndarray       # (1,) COUNTERS
     totals: np.ndarray         # (1,) TOTALS
     pair: np.ndarray           # (P,) BOOK_PAIR
     peak_tension: np.ndarray   # (N,) N
@@ -202,7 +198,7 @@ class _Bytes(NamedTuple):
 
 #: bytes per record of the state's record arrays (numba reads a dtype's size only as a number)
 _CONTACT_B, _INPUT_B, _CLOCK_B = CONTACT.itemsize, INPUT.itemsize, CLOCK.itemsize
-_COUNTERS_B, _TOTALS_B, _BOOK_PAIR_B = BOOK_COUNTERS.itemsize, TOTALS.itemsize, BOOK_PAIR.itemsize
+_COUNTERS_B, _TOTALS_B, _BOOK_PAIR_B = COUNTERS.itemsize, TOTALS.itemsize, BOOK_PAIR.itemsize
 
 
 @inline
@@ -242,7 +238,7 @@ def zeros(ny, npair, n, stages, k, zeno_max):
     integrator = Integrator(_take(m, free, b.f).view(f), _take(m, free, b.y_prev).view(f),
                             _take(m, free, b.stages).view(f).reshape((stages, ny)),
                             _take(m, free, b.dense).view(f).reshape((ny, k)), _take(m, free, b.clock).view(CLOCK))
-    book = Book(_take(m, free, b.counters).view(BOOK_COUNTERS), _take(m, free, b.totals).view(TOTALS),
+    book = Book(_take(m, free, b.counters).view(COUNTERS), _take(m, free, b.totals).view(TOTALS),
                 _take(m, free, b.pair).view(BOOK_PAIR), _take(m, free, b.peak_tension).view(f),
                 _take(m, free, b.ring).view(f).reshape((npair, zeno_max)))
     broad_phase = BroadPhase(_take(m, free, b.near).view(np.int64), _take(m, free, b.count).view(np.int64),
