@@ -111,6 +111,8 @@ def test_a_key_whose_values_mix_kinds_is_written_as_their_json_text(folder):
     (('mode = "grid"', 'mode = "latin"'), "mode"),
     (("values = [1500.0, 3000.0]", "values = []"), "parameters[0].values"),
     (("samples = 5", "samples = -5"), "samples"),  # a grid ignores it, and took -5
+    (("values = [1500.0, 3000.0]", 'distribution = "grid"\nvalues = [1500.0, 3000.0]'),
+     "parameters[0].distribution"),  # a grid has no distribution, and took "grid"
     (('key = "contact.stiffness"', 'key = "berries[0].hinge_damping"'), "parameters"),  # and berries[*]: one value
 ])
 def test_bad_spec_names_the_field(folder, change, field):

@@ -149,15 +149,15 @@ def _parameter(key: str, raw: Any, mode: str, base: dict) -> Parameter:
     if not isinstance(path, str):
         raise SceneError(f"{key}.key", "expected a path into the scene such as \"contact.stiffness\"")
     count = len(slots(copy.deepcopy(base), path, f"{key}.key"))  # the path exists in the base scene
-    dist = raw.get("distribution", "grid" if mode != "monte-carlo" else None)
     if mode != "monte-carlo":
-        if dist != "grid":
-            raise SceneError(f"{key}.distribution", f"a {mode} sweep takes values lists only")
+        if "distribution" in raw:
+            raise SceneError(f"{key}.distribution", f"a {mode} sweep takes values lists only; distribution "
+                                                    "(uniform, normal or choice) is for monte-carlo")
         if "shared" in raw:
             raise SceneError(f"{key}.shared", f"a {mode} sweep sets every element of a [*] key to each value; "
                                               "shared is for monte-carlo")
         return Parameter(path, _values(f"{key}.values", raw.get("values")))
-    dist = v.choice(f"{key}.distribution", dist, ("uniform", "normal", "choice"))
+    dist = v.choice(f"{key}.distribution", raw.get("distribution"), ("uniform", "normal", "choice"))
     shared = v.boolean(f"{key}.shared", raw.get("shared", False))
     each = count if "[*]" in path and not shared else 0
     if dist == "choice":
