@@ -1,19 +1,57 @@
 """Where one `simulate` of a benchmark scene goes (docs/bench_notes.md, "Why the speed targets are missed"): the
 Python around the compiled loop (Solver() and the result), the output grid, and the loop's cost per step beyond
-its right-hand-side evaluations (RHS evaluations × one bare RHS, bench/costs.py). Each figure is the minimum of
-`REPEATS` interleaved runs.
+its right-hand-side evaluations (RHS evaluations × one bare RHS, bench/costs.py), and the Python's largest pieces
+timed alone. Each figure is the minimum of `REPEATS` interleaved runs (of PIECE_REPEATS calls for a piece).
 Run: .venv/bin/python benchmarks/run_breakdown.py ["paper collision"] [rtol]"""
 from __future__ import annotations
 
+import math
 import sys
 import time
+
+import numpy as np
 
 import grapefmu
 from grapefmu.bench.costs import rhs_seconds
 from grapefmu.bench.scenes import bench_scenes, build
-from grapefmu.solver.solver import Solver
+from grapefmu.results.impacts import Impacts
+from grapefmu.solver import budget, components
+from grapefmu.solver import session as ses
+from grapefmu.solver.solver import Solver, open_impacts
 
 REPEATS = 30
+PIECE_REPEATS = 3000
+
+
+def pieces(sc, kw: dict) -> dict[str, float]:
+    """Seconds each piece of the Python around a run takes alone (the fastest of PIECE_REPEATS calls)."""
+    s = Solver(sc, **kw)
+    run = s.run(output_interval=1e-3)
+    S = s.state
+    finished = run.impacts.records()[~run.impacts.ongoing]
+    ongoing = open_impacts(S.physical.contacts, S.book.pair, run.t[-1])
+    calls = {
+        "Solver()": lambda: Solver(sc, **kw),
+        "  its compiled start (session.start)": lambda: ses.start(s.M, s.excitation, s.tableau, s.config,
+                                                                    np.zeros(s.layout.size), 0.0, np.uint64(1),
+                                                                    sc.solver.zeno_max_events),
+        "  the state boxed for Python (session.views)": lambda: ses.views(s._session),
+        "the run's recorder (session.recording)": lambda: ses.recording(s._session, len(run.t) + 1, 1e-3, run.t[-1]),
+        "the impacts going on (open_impacts)": lambda: open_impacts(S.physical.contacts, S.book.pair, run.t[-1]),
+        "the impact book (Impacts.from_records)": lambda: Impacts.from_records(finished, ongoing),
+        "stats (run_stats)": lambda: s.stats,
+        "memory budget (budget.check_samples)": lambda: budget.check_samples(sc.model, run.t[-1], 1e-3),
+        "independent groups (components.groups)": lambda: components.groups(sc.model),
+    }
+    out = {}
+    for name, fn in calls.items():
+        best = math.inf
+        for _ in range(PIECE_REPEATS):
+            t0 = time.perf_counter()
+            fn()
+            best = min(best, time.perf_counter() - t0)
+        out[name] = best
+    return out
 
 
 def main(name: str = "paper collision", rtol: float = 1e-6) -> None:
@@ -46,6 +84,9 @@ def main(name: str = "paper collision", rtol: float = 1e-6) -> None:
     print(f"  output grid          {grid * 1e3:8.3f} ms  ({grid / max(len(run.t) - 1, 1) * 1e9:.0f} ns a sample)")
     print(f"  loop without grid    {best['loop, no grid'] * 1e3:8.3f} ms  = RHS floor {floor * 1e3:.3f} ms "
           f"+ {beyond * 1e6:.2f} µs a step beyond its RHS evaluations")
+    print("  the Python's pieces, each alone:")
+    for piece, sec in pieces(sc, kw).items():
+        print(f"    {piece:46s} {sec * 1e6:6.2f} µs")
 
 
 if __name__ == "__main__":
