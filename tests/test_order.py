@@ -2,6 +2,8 @@
 asked whichever pair steps it, against scipy's DOP853 with its own event location (method="reference")."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -14,7 +16,7 @@ from grapefmu.solver.tableau import DOP853, DOPRI5
 
 
 def test_the_pair_follows_the_tolerance_and_the_scene_and_dop853_is_asked_a_third_of_it():
-    """The rule of solver.tableau_for, and the tolerances each pair is asked (Solver.config) against those reported."""
+    """The rule of solver.integrator_for, and the tolerances each pair is asked (Solver.config) against those reported."""
     two = build(bench_scenes()["paper collision"])
     cluster = scale_scene("cluster", solver_module.FEW_BERRIES)
     for scene, rtol, tableau in [(two, 1e-5, DOPRI5), (two, 1e-6, DOP853), (two, 1e-10, DOP853),
@@ -28,6 +30,33 @@ def test_the_pair_follows_the_tolerance_and_the_scene_and_dop853_is_asked_a_thir
     # a face's solver: its communication points cut the steps, as a cluster's onsets do
     assert Solver(two, rtol=1e-6, driven=True).tableau is DOPRI5
     assert Solver(two, rtol=1e-8, driven=True).tableau is DOP853
+
+
+def pinned(scene, integrator):
+    return replace(scene, solver=replace(scene.solver, integrator=integrator))
+
+
+def test_a_scene_pins_its_integrator_and_a_run_names_the_one_that_stepped_it(monkeypatch):
+    """`solver.integrator` overrides the rule both ways (DOP853 still asked a third); a pinned DOPRI5 takes the steps
+    the rule takes when its crossovers are moved (the same numbers to the bit), and every run's stats name its pair:
+    what a recording keeps, so that a replay pins it (tests/test_replay_check.py)."""
+    two = build(bench_scenes()["paper collision"])
+    assert Solver(pinned(two, "DOPRI5"), rtol=1e-8).tableau is DOPRI5
+    s = Solver(pinned(two, "DOP853"), rtol=1e-4, atol=1e-6)
+    assert s.tableau is DOP853 and s.integrator == "DOP853"
+    assert s.config["rtol"][0] == pytest.approx(solver_module.DOP853_TOLERANCE * 1e-4, rel=1e-15)
+    assert Solver(pinned(two, "DOPRI5"), rtol=1e-8, driven=True).tableau is DOPRI5  # a face's too
+    run = grapefmu.simulate(pinned(two, "DOPRI5"), rtol=1e-6, atol=1e-8)
+    assert run.stats["integrator"] == "DOPRI5"
+    assert grapefmu.simulate(two, rtol=1e-6, atol=1e-8).stats["integrator"] == "DOP853"
+    assert grapefmu.simulate(two, method="paper", fixed_step=1e-3, cross_check=False).stats["integrator"] == "ode23"
+    cluster = scale_scene("cluster", 12, 1e-6, 0.05)
+    islands = grapefmu.simulate(replace(cluster, solver=replace(cluster.solver, islands=True, integrator="DOP853")))
+    assert "islands_formed" in islands.stats and islands.stats["integrator"] == "DOP853"  # the whole scene's pair
+    monkeypatch.setattr(solver_module, "DOP853_BELOW_FEW", 0.0)
+    ruled = grapefmu.simulate(two, rtol=1e-6, atol=1e-8)
+    assert ruled.stats["integrator"] == "DOPRI5"
+    np.testing.assert_array_equal(run.y, ruled.y)
 
 
 @pytest.mark.parametrize("rtol", [1e-6, 1e-7])

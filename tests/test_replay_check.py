@@ -217,3 +217,29 @@ def test_a_recording_is_rerun_the_way_it_ran_in_islands_or_not(tmp_path, monkeyp
         assert ("islands_formed" in simulate(sc).stats) == (replay_from == 12)  # today's rule: the other way
         result = check(path)
         assert result.compared == len(run.t) and result.max_deviation == 0.0
+
+
+@pytest.mark.parametrize("ran, rtol", [("DOPRI5", 3e-6), ("DOP853", 1e-4)])
+def test_a_recording_is_rerun_with_the_pair_it_was_stepped_with(tmp_path, monkeypatch, ran, rtol):
+    """A recording names the Runge–Kutta pair its run stepped with (the run's stats' integrator): replayed where
+    today's rule picks the other pair, it is re-simulated with its own (solver.integrator pinned), to the bit; with
+    the other pair it would agree to the tolerance only. A recording that names none was made under the rule of its
+    day, DOP853 below rtol 1e-7 alone, and is pinned to what that rule chose."""
+    from grapefmu.bench.scenes import bench_scenes, build
+    from grapefmu.solver import solver as solver_module
+    sc = build(bench_scenes()["paper collision"])
+    today = simulate(sc, 0.5, rtol=rtol, atol=rtol / 100)
+    assert today.stats["integrator"] != ran
+    with monkeypatch.context() as m:  # the rule of another day
+        m.setattr(solver_module, "DOP853_BELOW_FEW", 1.0 if ran == "DOP853" else 0.0)
+        run = simulate(sc, 0.5, rtol=rtol, atol=rtol / 100)
+    assert run.stats["integrator"] == ran and float(abs(run.y - today.y).max()) > 0.0
+    named = tmp_path / "named.mcap"
+    write_mcap(run, named)
+    result = check(named)
+    assert result.compared == len(run.t) and result.max_deviation == 0.0
+    if ran == "DOPRI5":  # what the rule before 2026-11-29 chose at this rtol: a recording of then names no pair
+        del run.stats["integrator"]
+        unnamed = tmp_path / "unnamed.mcap"
+        write_mcap(run, unnamed)
+        assert check(unnamed).max_deviation == 0.0

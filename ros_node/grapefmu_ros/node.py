@@ -115,8 +115,8 @@ class SimulatorNode(Node):
         m = self.scene.model
         ns = self.get_namespace()
         self.prefix = "" if ns == "/" else ns.strip("/") + "/"  # of every TF frame
-        self.recorder = McapRecorder(gp("record"), metadata(self.scene, self.mode, self.rate, ns)) \
-            if gp("record") else None
+        self.recorder = McapRecorder(gp("record"), metadata(self.scene, self.mode, self.rate, ns, Solver(
+            self.scene, driven=True).integrator)) if gp("record") else None
         topics = ["joint_states", "pedicel_tension", *msgs.wrench_topics(m), "contacts", "summary", "collision_events",
                   "markers", "/diagnostics", "rachis/accel_applied", "rachis/twist_applied", "sim_time", "/tf",
                   "/tf_static", "robot_description"] + (["/clock"] if self.mode == "lockstep" else [])

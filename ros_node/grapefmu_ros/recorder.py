@@ -43,8 +43,9 @@ class McapRecorder:
             self._fh.close()
 
 
-def metadata(scene, mode: str, rate_hz: float, namespace: str) -> dict[str, str]:
+def metadata(scene, mode: str, rate_hz: float, namespace: str, integrator: str) -> dict[str, str]:
+    """integrator: the pair the node's solver steps with (Solver.integrator), which a replay pins."""
     s = scene.solver
     return {"grapefmu_version": __version__, "scene_name": scene.name, "scene_toml": scene.source,
             "method": "event", "input_source": "applied", "turning": "true", "node_mode": mode, "namespace": namespace,
-            "solver": json.dumps({"rtol": s.rtol, "atol": s.atol, "rate_hz": rate_hz})}
+            "solver": json.dumps({"rtol": s.rtol, "atol": s.atol, "rate_hz": rate_hz, "integrator": integrator})}

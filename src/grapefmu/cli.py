@@ -57,7 +57,8 @@ def _summary_table(run) -> str:
     """The summary as a table; every quantity in the unit its key and the CSV columns carry (N, J, s)."""
     s = run.summary()
     rows = [
-        ("simulated", f"{s['t_end_s']:.4g} s, {s['samples']} samples, method {s['method']}"),
+        ("simulated", f"{s['t_end_s']:.4g} s, {s['samples']} samples, method {s['method']}"
+                      + (f" ({s['integrator']})" if "integrator" in s else "")),
         ("solver", f"{s.get('steps', '-')} steps, {s.get('rejected', '-')} rejected, "
                    f"{s.get('rhs_evaluations', '-')} RHS evaluations, {s['wall_time_s']:.4g} s wall"
                    + (f"; in multirate islands: {s['islands_formed']} formed, {s['island_rollbacks']} rolled back"

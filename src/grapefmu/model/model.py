@@ -356,13 +356,16 @@ class SolverSettings:
     #: a window takes its own steps. True or False, or "auto": in islands from ISLANDS_FROM berries on, where the
     #: method allows. 'event' method with adaptive steps only; the faces (FMU, node) always step the whole scene
     islands: bool | str = "auto"
+    #: the Runge–Kutta pair of the 'event' method's adaptive steps: "auto" (by the tolerance and the scene,
+    #: solver.integrator_for), "DOPRI5" or "DOP853" (pinned: a replay pins the one its recording was made with)
+    integrator: str = "auto"
 
     def refusal(self) -> tuple[str, str] | None:
         """(scene key, why) for a setting outside its bound or choices, or None."""
         why = refusal(self, "solver")
         if why:
             return why
-        for name, allowed in (("method", METHODS), ("contact_location", CONTACT_LOCATIONS)):
+        for name, allowed in (("method", METHODS), ("contact_location", CONTACT_LOCATIONS), ("integrator", INTEGRATORS)):
             if getattr(self, name) not in allowed:
                 return (f"solver.{name}", f"expected one of {', '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
         if not isinstance(self.zeno_max_events, Integral):
@@ -372,12 +375,22 @@ class SolverSettings:
         if not (self.islands == "auto" or isinstance(self.islands, bool)):
             return ("solver.islands", f"expected true, false or \"auto\", got {self.islands!r}")
         why = islands_refusal(self.method, self.fixed_step) if self.islands is True else None
-        return ("solver.islands", why) if why else None
+        if why:
+            return "solver.islands", why
+        if self.integrator != "auto" and self.method != "event":
+            return ("solver.integrator", f"{self.integrator!r} is for the 'event' method; method = {self.method!r} "
+                    "steps its own pair (leave integrator \"auto\")")
+        if self.integrator != "auto" and self.fixed_step > 0.0:
+            return ("solver.integrator", f"{self.integrator!r} is for adaptive steps; a fixed step "
+                    f"({self.fixed_step:g} s) steps DOPRI5 (leave integrator \"auto\")")
+        return None
 
 
 #: the solver's methods (SolverSettings.method) and ways to locate a contact's onset (contact_location)
 METHODS = ("event", "paper", "reference")
 CONTACT_LOCATIONS = ("events", "step-control")
+#: the pairs a scene may pin for the event method (SolverSettings.integrator), or "auto"
+INTEGRATORS = ("auto", "DOPRI5", "DOP853")
 
 
 #: berries from which `solver.islands = "auto"` runs a scene in multirate islands: below, islands cost more than one

@@ -228,7 +228,7 @@ class Run:
             unit("mean_dissipated_per_berry", "J"): float(per_berry.mean()),
             "max_active_pairs": int(self.active_pairs.max()) if len(self.t) else 0,
             **{k: v for k, v in self.stats.items() if k in (
-                "method", *WORK, "degrees_of_freedom", "candidate_pairs", "near_pairs_mean", "islands_formed",
+                "method", "integrator", *WORK, "degrees_of_freedom", "candidate_pairs", "near_pairs_mean", "islands_formed",
                 "island_rollbacks")},
             **{unit(k, "s"): self.stats[k] for k in ("wall_time", "compile_time") if k in self.stats},
             "warnings": trust.warnings(self),  # one line each where the results cannot be trusted

@@ -17,8 +17,8 @@ from . import validate as v
 from ..model.bounds import Bound, bound
 from ..model.contact import (EFFECTIVE_MODULUS, LAW_BOUNDS, LAWS, RESTITUTION, ContactLaw, Law, hertz_stiffness,
                              hunt_crossley_chi, kelvin_voigt_damping, refuses_tension)
-from ..model.model import (ANGLE, ANGULAR_VELOCITY, CONTACT_LOCATIONS, METHODS, OBSTACLE_KINDS, Berry, ContactPair,
-                           Coupling, Model, Obstacle, Scene, SolverSettings, Thresholds)
+from ..model.model import (ANGLE, ANGULAR_VELOCITY, CONTACT_LOCATIONS, INTEGRATORS, METHODS, OBSTACLE_KINDS, Berry,
+                           ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings, Thresholds)
 from .budget import check_state
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
@@ -50,7 +50,7 @@ EXCITATION_KEYS = {
     "pose-table": {"kind", "file"},
 }
 SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events",
-               "contact_location", "islands"}
+               "contact_location", "islands", "integrator"}
 THRESHOLD_KEYS = {"detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction"}
 
 
@@ -369,6 +369,7 @@ def _solver(raw: Any) -> SolverSettings:
         contact_location=v.choice(f"{key}.contact_location", raw.get("contact_location", d.contact_location),
                                   CONTACT_LOCATIONS),
         islands=_islands(f"{key}.islands", raw.get("islands", d.islands)),
+        integrator=v.choice(f"{key}.integrator", raw.get("integrator", d.integrator), INTEGRATORS),
     )
     why = s.refusal()
     if why:

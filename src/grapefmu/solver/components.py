@@ -129,6 +129,8 @@ def merge(scene: Scene, parts: list[list[int]], runs: list[Run]) -> Run:
     if all("near_pairs_mean" in r.stats for r in runs):
         stats["near_pairs_mean"] = sum(r.stats["near_pairs_mean"] * r.stats["steps"] for r in runs) / max(stats["steps"], 1)
     stats["groups"] = len(parts)
+    if len({r.stats.get("integrator") for r in runs}) > 1:  # groups of fewer and more berries (solver.integrator_for)
+        stats["integrator"] = "mixed"
     impacts = Impacts.from_records(concat(finished), concat(ongoing))
     changes = concat(changes) if changes else np.zeros(0, CHANGE)
     log = ContactLog(start, changes[np.argsort(changes["sample"], kind="stable")])

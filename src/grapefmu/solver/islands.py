@@ -358,8 +358,8 @@ class Islands:
         impacts = concat(finished) if finished else np.zeros(0, dtype=IMPACT)
         impacts = impacts[np.argsort(impacts["end"], kind="stable")]
         stats = run_stats(self.counters, totals[-1:], lay, len(self.scene.model.pairs))
-        stats |= {"wall_time": wall, "method": "event", "t_start": self.t0, "rtol": self.whole.rtol,
-                  "atol": self.whole.atol, "fixed_step": self.whole.fixed_step, "islands_formed": self.formed,
-                  "island_rollbacks": self.rollbacks, "window": self.window}
+        stats |= {"wall_time": wall, "method": "event", "integrator": self.whole.integrator, "t_start": self.t0,
+                  "rtol": self.whole.rtol, "atol": self.whole.atol, "fixed_step": self.whole.fixed_step,
+                  "islands_formed": self.formed, "island_rollbacks": self.rollbacks, "window": self.window}
         return Run(self.scene, t, y, log, self.accel, totals, Impacts.from_records(impacts, ongoing),
                    self.G[2]["peak_force"].copy(), self.G[4].copy(), stats)

@@ -75,8 +75,11 @@ class Solver:
         self.rtol = rtol if rtol is not None else s.rtol
         self.atol = atol if atol is not None else s.atol
         self.fixed_step = fixed_step if fixed_step is not None else s.fixed_step
-        self.tableau = tableau_for(self.method, self.rtol, self.fixed_step, scene.model.n_berries, driven)
-        tighter = DOP853_TOLERANCE if self.tableau is DOP853 else 1.0
+        #: the Runge–Kutta pair that steps it, by name (INTEGRATORS; a run's stats give it as "integrator")
+        self.integrator = integrator_for(self.method, self.rtol, self.fixed_step, scene.model.n_berries, driven,
+                                         s.integrator)
+        self.tableau = tableau(self.integrator)
+        tighter = DOP853_TOLERANCE if self.integrator == "DOP853" else 1.0
         self.max_steps = int(max_steps)
         self.model = scene.model
         self.M = scene.arrays
@@ -357,8 +360,8 @@ class Solver:
         changes.append(self._changes(rec))
         impacts.append(rec.impacts[: int(cur["n_impacts"][0])])
         t, y, accel, totals = (concat([c[i] for c in chunks]) for i in range(st.SAMPLED))
-        stats = self.stats | {"wall_time": wall, "method": self.method, "t_start": t_start, "rtol": self.rtol,
-                              "atol": self.atol, "fixed_step": self.fixed_step}
+        stats = self.stats | {"wall_time": wall, "method": self.method, "integrator": self.integrator,
+                              "t_start": t_start, "rtol": self.rtol, "atol": self.atol, "fixed_step": self.fixed_step}
         ongoing = open_impacts(self.state.physical.contacts, self.state.book.pair, self.t)
         return Run(self.scene, t, y, ContactLog(start, concat(changes)), accel, totals,
                    Impacts.from_records(concat(impacts), ongoing),
@@ -395,14 +398,24 @@ def run_stats(counters: np.ndarray, totals: np.ndarray, layout, n_pairs: int) ->
                 "near_pairs_mean": int(counters["near_pairs_sum"][0]) / max(c["steps"], 1)}
 
 
-def tableau_for(method: str, rtol: float, fixed_step: float, n_berries: int, driven: bool) -> Tableau:
-    """The pair a run steps with: the paper's imitation keeps ode23's; the event method takes the order its
-    tolerance and its scene pay for (DOP853_BELOW, DOP853_BELOW_FEW). A fixed step has no tolerance to match and
-    keeps DOPRI5."""
+def integrator_for(method: str, rtol: float, fixed_step: float, n_berries: int, driven: bool,
+                   pinned: str = "auto") -> str:
+    """The pair a run steps with, by name: the paper's imitation keeps ode23's; the event method takes the one a
+    scene pins (solver.integrator), else the order its tolerance and its scene pay for (DOP853_BELOW,
+    DOP853_BELOW_FEW). A fixed step has no tolerance to match and keeps DOPRI5."""
     if method != "event":
-        return BOGACKI_SHAMPINE
+        return "ode23"
+    if fixed_step > 0.0:
+        return "DOPRI5"
+    if pinned != "auto":
+        return pinned
     below = DOP853_BELOW_FEW if n_berries < FEW_BERRIES and not driven else DOP853_BELOW
-    return DOP853 if fixed_step <= 0.0 and rtol < below else DOPRI5
+    return "DOP853" if rtol < below else "DOPRI5"
+
+
+def tableau(integrator: str) -> Tableau:
+    """The Tableau of a pair integrator_for names (looked up when asked, so that a test may replace one)."""
+    return {"DOPRI5": DOPRI5, "DOP853": DOP853, "ode23": BOGACKI_SHAMPINE}[integrator]
 
 
 def _step_size(dt) -> float:
