@@ -243,3 +243,21 @@ def test_a_recording_is_rerun_with_the_pair_it_was_stepped_with(tmp_path, monkey
         unnamed = tmp_path / "unnamed.mcap"
         write_mcap(run, unnamed)
         assert check(unnamed).max_deviation == 0.0
+
+
+def test_a_recording_of_groups_stepped_by_different_pairs_runs_under_todays_rule(tmp_path, monkeypatch):
+    """Independent groups of a scene may step with different pairs (solver.integrator_for counts a group's berries):
+    the run's stats say "mixed", which no scene can pin, and its replay runs under the rule, to the bit."""
+    from grapefmu.solver import solver as solver_module
+
+    from .conftest import dual, scene
+    doc = dual()
+    doc["berries"].append({**doc["berries"][0], "name": "lone", "hinge_x": -0.5, "angle": 0.3})  # out of reach
+    sc = scene(doc)
+    monkeypatch.setattr(solver_module, "FEW_BERRIES", 2)  # the pair's group steps with DOPRI5, the lone berry DOP853
+    run = simulate(sc, 0.3, rtol=1e-6, atol=1e-8)
+    assert run.stats["groups"] == 2 and run.stats["integrator"] == "mixed"
+    path = tmp_path / "mixed.mcap"
+    write_mcap(run, path)
+    result = check(path)
+    assert result.compared == len(run.t) and result.max_deviation == 0.0

@@ -365,7 +365,8 @@ class SolverSettings:
         why = refusal(self, "solver")
         if why:
             return why
-        for name, allowed in (("method", METHODS), ("contact_location", CONTACT_LOCATIONS), ("integrator", INTEGRATORS)):
+        for name, allowed in (("method", METHODS), ("contact_location", CONTACT_LOCATIONS),
+                              ("integrator", INTEGRATORS)):
             if getattr(self, name) not in allowed:
                 return (f"solver.{name}", f"expected one of {', '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
         if not isinstance(self.zeno_max_events, Integral):
