@@ -16,7 +16,7 @@ from grapefmu.solver.tableau import DOP853, DOPRI5
 
 
 def test_the_pair_follows_the_tolerance_and_the_scene_and_dop853_is_asked_a_third_of_it():
-    """The rule of solver.integrator_for, and the tolerances each pair is asked (Solver.config) against those reported."""
+    """The rule of solver.integrator_for, and the tolerances each pair is asked (Solver.config) and those reported."""
     two = build(bench_scenes()["paper collision"])
     cluster = scale_scene("cluster", solver_module.FEW_BERRIES)
     for scene, rtol, tableau in [(two, 1e-5, DOPRI5), (two, 1e-6, DOP853), (two, 1e-10, DOP853),
