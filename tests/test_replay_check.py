@@ -261,3 +261,72 @@ def test_a_recording_of_groups_stepped_by_different_pairs_runs_under_todays_rule
     write_mcap(run, path)
     result = check(path)
     assert result.compared == len(run.t) and result.max_deviation == 0.0
+
+
+def test_a_scene_changed_in_code_is_recorded_as_it_ran(tmp_path):
+    """A scene changed in code (`dataclasses.replace`: its initial state, a berry's hinge, its solver, thresholds and
+    name) is recorded with a document that reads back as it, not the one it was read from: its replay re-simulates
+    it to the bit, where the stale document's scene runs otherwise, and the Parquet file names it too. An unchanged
+    scene, or the face's driven one, keeps the text it was read from, comments and all."""
+    from dataclasses import replace
+
+    import pyarrow.parquet as pq
+
+    from grapefmu.results.writers import write_parquet
+    from grapefmu.scenefile import parse_scene, scene_toml
+    sc = load_scene(default_scene_path())
+    assert scene_toml(sc) == scene_toml(sc.driven()) == sc.source and sc.source.lstrip().startswith("#")
+    m = sc.model
+    changed = replace(sc, angles=(-0.2, 0.1), name="changed", solver=replace(sc.solver, rtol=1e-7, atol=1e-9),
+                      thresholds=replace(sc.thresholds, bruise_force=1.2),
+                      model=replace(m, berries=(replace(m.berries[0], hinge_stiffness=0.004),) + m.berries[1:]))
+    run = simulate(changed, 0.3)
+    stale = simulate(parse_scene(sc.source), 0.3, rtol=1e-7, atol=1e-9)
+    assert float(abs(stale.y[:, :2] - run.y[:, :2]).max()) > 100 * TOLERANCE
+    path = tmp_path / "changed.mcap"
+    write_mcap(run, path)
+    result = check(path)
+    assert result.compared == len(run.t) and result.max_deviation == 0.0
+    write_parquet(run, tmp_path / "changed.parquet")
+    text = pq.read_schema(tmp_path / "changed.parquet").metadata[b"grapefmu.scene"].decode()
+    again = parse_scene(text)
+    assert again.key == changed.key != sc.key and again.name == "changed" and again.solver.rtol == 1e-7
+
+
+def test_a_change_its_document_cannot_carry_is_refused_before_a_file_is_written(tmp_path):
+    """A berry's mass changed in code leaves its contact law as calibrated for the old mass (the file asks for a
+    restitution, so reading it back calibrates anew): no document describes that scene, and recording it is refused
+    naming `source`, before a file exists. So is a scene built in code without a document."""
+    from dataclasses import replace
+
+    from grapefmu.errors import SceneError
+    from grapefmu.model.model import Scene
+    from grapefmu.scenefile import scene_toml
+    sc = load_scene(default_scene_path())
+    m = sc.model
+    heavier = replace(sc, model=replace(m, berries=(replace(m.berries[0], mass=0.02),) + m.berries[1:]))
+    assert heavier.model.pairs == m.pairs
+    run = simulate(heavier, 0.05)
+    with pytest.raises(SceneError, match="contacts") as e:
+        write_mcap(run, tmp_path / "heavier.mcap")
+    assert e.value.key == "source" and list(tmp_path.iterdir()) == []
+    with pytest.raises(SceneError, match="without a scene document") as e:
+        scene_toml(Scene(m, sc.angles, sc.angular_velocities))
+    assert e.value.key == "source"
+
+
+@pytest.mark.parametrize("path", sorted(str(p.relative_to(default_scene_path().parent))
+                                        for p in default_scene_path().parent.rglob("*.toml")))
+def test_every_shipped_scene_reads_back_from_its_rewritten_document(path):
+    """The writer's berries, initial state, solver and thresholds on every packaged scene (planar and spherical
+    berries, hinges on and off the rod, obstacles, the pick-and-place and still rachis): a scene renamed in code, with one
+    berry's damping and a threshold changed, is described by the document written for it."""
+    from dataclasses import replace
+
+    from grapefmu.scenefile import parse_scene, scene_toml
+    sc = load_scene(default_scene_path().parent / path)
+    m = sc.model
+    changed = replace(sc, name="renamed", thresholds=replace(sc.thresholds, fatigue_fraction=0.4),
+                      model=replace(m, berries=(replace(m.berries[0], hinge_damping=3e-5),) + m.berries[1:]))
+    text = scene_toml(changed)
+    assert text != sc.source and parse_scene(text).key == changed.key != sc.key

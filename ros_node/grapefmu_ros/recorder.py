@@ -13,6 +13,7 @@ from mcap.writer import CompressionType
 from grapefmu import __version__
 from grapefmu.errors import RecordingError
 from grapefmu.recording.typestore import McapWriter
+from grapefmu.scenefile import scene_toml
 
 CHUNK_BYTES = 64 * 1024
 
@@ -46,6 +47,6 @@ class McapRecorder:
 def metadata(scene, mode: str, rate_hz: float, namespace: str, integrator: str) -> dict[str, str]:
     """integrator: the pair the node's solver steps with (Solver.integrator), which a replay pins."""
     s = scene.solver
-    return {"grapefmu_version": __version__, "scene_name": scene.name, "scene_toml": scene.source,
+    return {"grapefmu_version": __version__, "scene_name": scene.name, "scene_toml": scene_toml(scene),
             "method": "event", "input_source": "applied", "turning": "true", "node_mode": mode, "namespace": namespace,
             "solver": json.dumps({"rtol": s.rtol, "atol": s.atol, "rate_hz": rate_hz, "integrator": integrator})}

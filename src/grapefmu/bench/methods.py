@@ -10,6 +10,7 @@ import numpy as np
 
 from ..errors import GrapefmuError
 from ..physics.excitation import accel
+from ..scenefile import scene_toml
 from ..solver.api import simulate
 
 GRID = 1e-3
@@ -144,7 +145,7 @@ def fmu_fmpy(scene):
     with tempfile.TemporaryDirectory() as d:
         path = f"{d}/scene.toml"
         with open(path, "w") as fh:
-            fh.write(scene.source)
+            fh.write(scene_toml(scene))
         r = subprocess.run([sys.executable, "-m", "grapefmu_fmu.bench_run", path], capture_output=True, text=True)
     if r.returncode != 0 or "JSON:" not in r.stdout:
         return Outcome(failure=f"FMU run failed: {(r.stderr or r.stdout)[-200:]}"), math.nan

@@ -450,14 +450,31 @@ class Scene:
     excitation: Excitation = field(default_factory=constant)
     solver: SolverSettings = field(default_factory=SolverSettings)
     thresholds: Thresholds = field(default_factory=Thresholds)
-    source: str = ""          # the TOML text it was read from, kept for reproducible recordings
+    source: str = ""          # the TOML text it was read from (scenefile.scene_toml: the text a recording keeps)
     name: str = "scene"
+    #: the `key` of the scene `source` was read as: a scene built with a source is described by it, and one changed
+    #: in code since (`dataclasses.replace`) keeps its old key, so a stale source is told from a current one
+    source_key: bytes = b""
 
     def __post_init__(self):
         why = (self.model.refusal or self.refuses_state() or self.solver.refusal() or refusal(self.thresholds, "thresholds")
                or self.refuses_excitation() or self.model.refuses_turn(self.excitation))
         if why:
             raise SceneError(*why)
+        if self.source and not self.source_key:
+            object.__setattr__(self, "source_key", self.key)
+
+    @cached_property
+    def key(self) -> bytes:
+        """A hash of every fact a scene file states: equal keys, the same scene. A face's `driven` is not one (a
+        face drives a scene read from a file), nor is the excitation's description (its words)."""
+        X = self.excitation
+        h = hashlib.blake2b(digest_size=16)
+        h.update(repr((self.model, self.angles, self.angular_velocities, self.solver, self.thresholds, self.name,
+                       X.kind, X.arrays.kind, X.defined_until, X.key, X.orientation, X.angular_velocity)).encode())
+        for a in (X.arrays.par, X.arrays.table, X.arrays.breaks):
+            h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+        return h.digest()
 
     def refuses_state(self) -> tuple[str, str] | None:
         """(key, why) for an initial angle or angular velocity outside its bound, a spherical swing off the chart, or

@@ -11,6 +11,7 @@ from .. import __version__
 from ..model.model import ISLANDS_FROM
 from ..results.run import Run
 from ..results.writers import atomic_path
+from ..scenefile import scene_toml
 from . import messages
 from .stamps import to_ns
 from .typestore import McapWriter
@@ -18,7 +19,7 @@ from .typestore import McapWriter
 
 def run_metadata(run: Run) -> dict[str, str]:
     s = run.scene.solver
-    return {"grapefmu_version": __version__, "scene_name": run.scene.name, "scene_toml": run.scene.source,
+    return {"grapefmu_version": __version__, "scene_name": run.scene.name, "scene_toml": scene_toml(run.scene),
             "method": str(run.stats.get("method", s.method)), "input_source": "scene",
             "namespace": messages.NAMESPACE,
             "solver": json.dumps({"rtol": run.stats.get("rtol", s.rtol), "atol": run.stats.get("atol", s.atol),
@@ -36,6 +37,7 @@ def write_mcap(run: Run, path: str | Path, *, chunk_size: int = 1 << 20) -> None
     Topics are named as the node under its default namespace publishes them, with /tf, /tf_static,
     robot_description, markers and /clock, so a 3D panel shows the run as it would the live node."""
     model = run.scene.model
+    meta = run_metadata(run)  # refuses a scene its TOML no longer describes before a file is opened
     snap = run.snapshot()
     summary = messages.summary_table(snap)
     timed = []  # (ns, order, topic, message): state topics first at each stamp, impacts last
@@ -55,6 +57,6 @@ def write_mcap(run: Run, path: str | Path, *, chunk_size: int = 1 << 20) -> None
     timed += [(ns, 2, topic, m) for ns, topic, m in messages.impact_messages(model, run.impacts)]
     timed.sort(key=lambda x: (x[0], x[1]))
     with atomic_path(path) as tmp, McapWriter(tmp, chunk_size=chunk_size) as wr:
-        wr.add_metadata("grapefmu", run_metadata(run))
+        wr.add_metadata("grapefmu", meta)
         for ns, _, topic, m in timed:
             wr.write(messages.absolute(topic), m, ns)

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import GrapefmuError
+from ..scenefile import scene_toml
 from .run import Run
 
 #: a temporary file is `.{name}.{host}-{pid}.{random}.grapefmu-part` beside its target: recognisably ours, and
@@ -150,7 +151,7 @@ def write_parquet(run: Run, path: str | Path) -> None:
     import pyarrow.parquet as pq
 
     cols = run.columns()
-    meta = {"grapefmu.scene": run.scene.source, "grapefmu.summary": json.dumps(run.summary(), default=str)}
+    meta = {"grapefmu.scene": scene_toml(run.scene), "grapefmu.summary": json.dumps(run.summary(), default=str)}
     table = pa.table({k: pa.array(v) for k, v in cols.items()}).replace_schema_metadata(meta)
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp)

@@ -45,3 +45,51 @@ def dumps(doc: dict[str, Any]) -> str:
             lines.append(f"[[{k}]]" if many else f"[{k}]")
             lines.extend(f"{kk} = {_value(vv)}" for kk, vv in item.items())
     return "\n".join(lines) + "\n"
+
+
+def scene_toml(scene) -> str:
+    """The TOML text that reads back as `scene`, for a recording or an FMU to name the scene that ran: the text it
+    was read from while that still describes it. For a scene changed in code since (`dataclasses.replace`), that
+    text with what a change in code commonly touches written anew (name, gravity, the berries and their initial
+    state, solver, thresholds) and read back to prove it. A change the document cannot carry that way (its
+    contacts, couplings, obstacles, excitation, or a berry's law its file derives from the berry) is refused, as is
+    a scene built in code without a document: write it as one (scene_from_dict) to record it."""
+    import tomllib
+    from dataclasses import fields
+
+    from ..errors import SceneError
+    from .parse import parse_scene
+    if scene.source and scene.source_key == scene.key:
+        return scene.source
+    if not scene.source:
+        raise SceneError("source", "a scene built in code without a scene document cannot name itself in a recording "
+                                   "or an FMU; build it from one (scenefile.scene_from_dict or parse_scene)")
+    doc = tomllib.loads(scene.source)
+    doc["name"], doc["gravity"] = scene.name, scene.model.gravity
+    k = 0
+    for b, raw in zip(scene.model.berries, doc["berries"]):
+        n = 2 if b.spherical else 1
+        q, w = scene.angles[k:k + n], scene.angular_velocities[k:k + n]
+        k += n
+        for f in ("hinge_x", "hinge", "kind", "azimuth", "rest_angles"):
+            raw.pop(f, None)
+        raw.update(name=b.name, mass=b.mass, radius=b.radius, twig_length=b.twig_length,
+                   hinge_stiffness=b.hinge_stiffness, hinge_damping=b.hinge_damping,
+                   **({"hinge": [b.hinge_x, b.hinge_y, b.hinge_z]} if b.hinge_y or b.hinge_z else {"hinge_x": b.hinge_x}),
+                   **({"kind": "spherical", "azimuth": b.azimuth, "rest_angles": list(b.rest_angles)}
+                      if b.spherical else {}),
+                   angle=list(q) if b.spherical else q[0], angular_velocity=list(w) if b.spherical else w[0])
+    for section, settings in (("solver", scene.solver), ("thresholds", scene.thresholds)):
+        doc[section] = {f.name: getattr(settings, f.name) for f in fields(settings)}
+    text = dumps(doc)
+    try:
+        again = parse_scene(text, name=scene.name).key
+    except SceneError as e:
+        again = e
+    if again != scene.key:
+        raise SceneError("source", "this scene was changed in code beyond its name, gravity, berries, initial state, "
+                                   "solver and thresholds (its contacts, couplings, obstacles or excitation), so the "
+                                   "TOML it was read from no longer describes it; make the change in the scene "
+                                   "document (scenefile.scene_from_dict) to record it"
+                         + (f" (read back: {again})" if isinstance(again, SceneError) else ""))
+    return text
