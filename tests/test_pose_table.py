@@ -65,7 +65,7 @@ def test_one_table_gives_one_trajectory_through_simulate_the_fmu_and_the_ros_nod
 
     t = np.arange(0.0, T + 1e-9, 0.01)
     path = write_table(tmp_path / "poses.csv", t, *minimum_jerk(t))
-    ex = read_pose_table(path, "excitation.file")
+    ex = read_pose_table(path.read_text(), str(path), "excitation.file")
     dt, stop = 5e-3, 0.6
     grid = np.round(np.arange(0.0, stop - 1e-9, dt), 9)
     held = accel(ex, grid)  # the table's acceleration, held over each step
@@ -105,7 +105,7 @@ def test_a_held_table_converges_to_the_table_as_the_step_shrinks(tmp_path):
     path = write_table(tmp_path / "poses.csv", t, *minimum_jerk(t))
     doc = {**table_scene(path, 0.6), "berries": dual(d0=0.2)["berries"]}
     exact = simulate(scene(doc), output_interval=1e-3)
-    ex = read_pose_table(path, "excitation.file")
+    ex = read_pose_table(path.read_text(), str(path), "excitation.file")
     errors = []
     for dt in (4e-3, 2e-3, 1e-3):
         grid = np.round(np.arange(0.0, 0.6 - 1e-9, dt), 9)
@@ -243,7 +243,7 @@ def test_a_turning_table_gives_one_trajectory_through_simulate_and_the_ros_node(
 
     path = turning_table(tmp_path / "turn.csv", 100, (0.3, 0.5, 0.4))
     doc = spherical_table_scene(path)
-    ex = read_pose_table(path, "excitation.file")
+    ex = read_pose_table(path.read_text(), str(path), "excitation.file")
     stop, fine = 0.6, 2.5e-3
     exact = simulate(scene(doc), stop, output_interval=fine)
     assert exact.collision_count > 0 and np.ptp(exact.base_angular_velocity, axis=0).min() > 0.5  # turns every way

@@ -330,3 +330,41 @@ def test_every_shipped_scene_reads_back_from_its_rewritten_document(path):
                       model=replace(m, berries=(replace(m.berries[0], hinge_damping=3e-5),) + m.berries[1:]))
     text = scene_toml(changed)
     assert text != sc.source and parse_scene(text).key == changed.key != sc.key
+
+
+POSES = "time,x,y,z,roll,pitch,yaw\n" + "".join(
+    f"{t:.2f},{0.05 * (10 * (t / 0.5) ** 3 - 15 * (t / 0.5) ** 4 + 6 * (t / 0.5) ** 5)!r},0.0,0.0,0.0,0.0,0.3\n"
+    for t in [k * 0.01 for k in range(51)])
+TABLES = {"csv": ("time,ax,az\n0,0.0,0.0\n0.1,2.0,1.0\n0.2,2.0,1.0\n", {"after": "zero"}), "pose-table": (POSES, {})}
+
+
+@pytest.mark.parametrize("kind", TABLES)
+def test_a_recording_carries_the_csv_its_scene_names(tmp_path, monkeypatch, kind):
+    """A scene whose excitation is a CSV file named relative to the scene file is recorded with the table inline
+    (`text`): its replay re-simulates it to the bit from another directory with the file gone. The table given
+    inline in a scene file reads as the same scene as the file, and a scene giving both is refused."""
+    from grapefmu.errors import SceneError
+    from grapefmu.scenefile import parse_scene, scene_from_dict
+    from grapefmu.scenefile.toml_out import dumps
+
+    from .conftest import dual
+    text, options = TABLES[kind]
+    (tmp_path / "scene").mkdir()
+    (tmp_path / "scene" / "motion.csv").write_text(text)
+    doc = dual(angles=(0.0, 0.3), excitation={"kind": kind, "file": "motion.csv", **options}, name="moved")
+    (tmp_path / "scene" / "moved.toml").write_text(dumps(doc))
+    sc = load_scene(tmp_path / "scene" / "moved.toml")
+    run = simulate(sc, 0.3)
+    assert float(abs(run.base_displacement).max()) > 1e-3  # the table moves the rachis
+    (tmp_path / "out").mkdir()
+    path = tmp_path / "out" / "moved.mcap"
+    write_mcap(run, path)
+    (tmp_path / "scene" / "motion.csv").unlink()
+    monkeypatch.chdir(tmp_path / "out")
+    result = check(path)
+    assert result.compared == len(run.t) and result.max_deviation == 0.0
+    inline = {**doc, "excitation": {"kind": kind, "text": text, **options}}
+    assert scene_from_dict(inline, tmp_path).key == sc.key
+    with pytest.raises(SceneError, match="exactly one") as e:
+        parse_scene(dumps({**doc, "excitation": {**inline["excitation"], "file": "motion.csv"}}))
+    assert e.value.key == "excitation.file"

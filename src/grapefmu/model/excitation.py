@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import csv
 import functools
+import io
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
@@ -53,6 +54,8 @@ class Excitation:
     orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
     angular_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     driven: bool = False  # a face's inputs may move and turn the rachis, whatever this excitation does
+    #: the CSV text a csv or pose-table excitation was read from: a recording carries it in its scene (scene_toml)
+    text: str = field(default="", repr=False)
 
     @functools.cached_property
     def turns(self) -> bool:
@@ -205,13 +208,13 @@ def pick_and_place(moves, start: float = 0.0, jerk_fraction: float = 0.125) -> E
     return table("pick-and-place", np.array(rows), desc)
 
 
-def read_csv(path: Path, key: str, hold: bool = False, after: str | None = None) -> Excitation:
-    """A CSV of time, ax, az, or of time, ax, ay, az, alpha_x, alpha_y, alpha_z (m/s², rad/s², world frame; a
-    header row allowed); linear in between (or held from each row to the
-    next with hold = true, as a sampled controller output is), zero before the first row. After the last
-    row: its acceleration kept (after = "hold"), zero (after = "zero"), or, without `after`, undefined: a run
-    that goes past it is refused (check_covers)."""
-    raw = _csv_rows(path, key, "CSV of time, ax, az")
+def read_csv(text: str, path: str, key: str, hold: bool = False, after: str | None = None) -> Excitation:
+    """A CSV (its text, read from `path`: the file, or the scene key that holds it inline) of time, ax, az, or of
+    time, ax, ay, az, alpha_x, alpha_y, alpha_z (m/s², rad/s², world frame; a header row allowed); linear in
+    between (or held from each row to the next with hold = true, as a sampled controller output is), zero before
+    the first row. After the last row: its acceleration kept (after = "hold"), zero (after = "zero"), or, without
+    `after`, undefined: a run that goes past it is refused (check_covers)."""
+    raw = _csv_rows(text, path, key, "CSV of time, ax, az")
     if raw and not _is_number(raw[0][0]):
         raw = raw[1:]
     if len(raw) < 2:
@@ -236,9 +239,10 @@ def read_csv(path: Path, key: str, hold: bool = False, after: str | None = None)
     last = float(arr[-1, 0])
     if after == "hold":
         arr = np.vstack([arr, [max(FOREVER, 2 * last), *arr[-1, 1:]]])
-    desc = f"csv: {path.name}, {len(rows)} rows{' (held)' if hold else ''}" + (f", then {after}" if after else "")
+    desc = (f"csv: {Path(path).name}, {len(rows)} rows{' (held)' if hold else ''}"
+            + (f", then {after}" if after else ""))
     ex = table("csv", arr, desc)
-    return Excitation(ex.kind, ex.arrays, ex.description, math.inf if after else last, key)
+    return Excitation(ex.kind, ex.arrays, ex.description, math.inf if after else last, key, text=text)
 
 
 #: a pose table's columns: time and position, then an orientation as fixed-axis roll, pitch, yaw (REP-103) or a
@@ -252,9 +256,9 @@ ORIENTATIONS = (("roll", "pitch", "yaw"), ("qx", "qy", "qz", "qw"))
 POSE_TURN_SUBDIVISION = 4
 
 
-def read_pose_table(path: Path, key: str) -> Excitation:
+def read_pose_table(text: str, path: str, key: str) -> Excitation:
     """The gripper's recorded poses (CSV with a header: time, x, y, z and roll, pitch, yaw or qx, qy, qz, qw; m,
-    rad, s) as the rachis motion.
+    rad, s; its text, read from `path`, a file or the scene key that holds it inline) as the rachis motion.
 
     Positions: a cubic spline with zero velocity at both ends (C2: its acceleration is piecewise linear, so the
     excitation is exactly a linear acceleration table and the rachis follows the spline to the solver's
@@ -268,7 +272,7 @@ def read_pose_table(path: Path, key: str) -> Excitation:
     from scipy.interpolate import CubicSpline
     from scipy.spatial.transform import Rotation
 
-    raw = _csv_rows(path, key, "CSV pose table")
+    raw = _csv_rows(text, path, key, "CSV pose table")
     if not raw:
         raise SceneError(key, f"{path}: empty; expected a header {', '.join(POSE_COLUMNS)}, then roll, pitch, yaw "
                               "or qx, qy, qz, qw")
@@ -324,11 +328,11 @@ def read_pose_table(path: Path, key: str) -> Excitation:
         raise SceneError(key, f"{path} row {row} columns {', '.join(orientation)}: following these orientations needs "
                               f"{np.abs(alpha[worst]).max():.3g} rad/s² (more than {MAX_ANGULAR_ACCEL:g}): a jump the "
                               "interpolation cannot follow (a glitch, or angles in degrees?)")
-    desc = (f"pose table: {path.name}, {len(t)} poses from {t[0]:g} to {t[-1]:g} s, cubic splines of position and "
-            f"rotation vector{'' if fixed_axis else f' (α at {POSE_TURN_SUBDIVISION} points per row)'}")
+    desc = (f"pose table: {Path(path).name}, {len(t)} poses from {t[0]:g} to {t[-1]:g} s, cubic splines of position "
+            f"and rotation vector{'' if fixed_axis else f' (α at {POSE_TURN_SUBDIVISION} points per row)'}")
     ex = table("pose-table", np.column_stack([knots, spline(knots, 2), alpha]), desc)
     q0 = tuple(float(c) for c in rot[0].as_quat())
-    return Excitation(ex.kind, ex.arrays, ex.description, math.inf, key, q0)
+    return Excitation(ex.kind, ex.arrays, ex.description, math.inf, key, q0, text=text)
 
 
 def _unwrapped(phi: np.ndarray) -> np.ndarray:
@@ -377,15 +381,12 @@ def zero_order_hold(rows: np.ndarray) -> np.ndarray:
     return out
 
 
-def _csv_rows(path: Path, key: str, what: str) -> list[list[str]]:
-    """The rows of a CSV file, comment lines (#) left out; a file that cannot be read is a SceneError on `key`."""
+def _csv_rows(text: str, path: str, key: str, what: str) -> list[list[str]]:
+    """The rows of a CSV text, comment lines (#) left out; a malformed one is a SceneError on `key`."""
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            return [r for r in csv.reader(fh) if r and not r[0].lstrip().startswith("#")]
-    except OSError as exc:
-        raise SceneError(key, f"cannot read {what} {path}: {exc.strerror or exc}") from None
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise SceneError(key, f"{path}: not a UTF-8 {what} ({exc})") from None
+        return [r for r in csv.reader(io.StringIO(text, newline="")) if r and not r[0].lstrip().startswith("#")]
+    except csv.Error as exc:
+        raise SceneError(key, f"{path}: not a {what} ({exc})") from None
 
 
 def _is_number(s: str) -> bool:

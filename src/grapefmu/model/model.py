@@ -467,11 +467,12 @@ class Scene:
     @cached_property
     def key(self) -> bytes:
         """A hash of every fact a scene file states: equal keys, the same scene. A face's `driven` is not one (a
-        face drives a scene read from a file), nor is the excitation's description (its words)."""
+        face drives a scene read from a file), nor are the excitation's description and the key its errors name
+        (the words, and where its table was given: a file, or inline in a recording)."""
         X = self.excitation
         h = hashlib.blake2b(digest_size=16)
         h.update(repr((self.model, self.angles, self.angular_velocities, self.solver, self.thresholds, self.name,
-                       X.kind, X.arrays.kind, X.defined_until, X.key, X.orientation, X.angular_velocity)).encode())
+                       X.kind, X.arrays.kind, X.defined_until, X.orientation, X.angular_velocity)).encode())
         for a in (X.arrays.par, X.arrays.table, X.arrays.breaks):
             h.update(np.ascontiguousarray(a, dtype=float).tobytes())
         return h.digest()

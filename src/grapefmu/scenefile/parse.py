@@ -46,8 +46,8 @@ EXCITATION_KEYS = {
     "sine": {"kind", "amplitude", "angular_amplitude", "frequency", "start", "duration"} | START_KEYS,
     "sweep": {"kind", "amplitude", "angular_amplitude", "f_start", "f_stop", "start", "duration"} | START_KEYS,
     "pick-and-place": {"kind", "moves", "start", "jerk_fraction"} | START_KEYS,
-    "csv": {"kind", "file", "hold", "after"} | START_KEYS,
-    "pose-table": {"kind", "file"},
+    "csv": {"kind", "file", "text", "hold", "after"} | START_KEYS,
+    "pose-table": {"kind", "file", "text"},
 }
 SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events",
                "contact_location", "islands", "integrator"}
@@ -400,6 +400,25 @@ def _excitation(raw: Any, base_dir: Path, t_end: float) -> exc.Excitation:
 
 
 
+def _table(raw: dict, key: str, base_dir: Path, what: str) -> tuple[str, str, str]:
+    """(CSV text, where it was read, its scene key) of a table given as a file or inline as `text` (which is how
+    a recording carries it: scenefile.scene_toml)."""
+    if ("file" in raw) == ("text" in raw):
+        raise SceneError(f"{key}.file", f"give file (a path to a {what}) or text (the {what} itself), exactly one")
+    name = "text" if "text" in raw else "file"
+    given = raw[name]
+    if not isinstance(given, str):
+        raise SceneError(f"{key}.{name}", f"expected {'the text of' if name == 'text' else 'a path to'} a {what}, "
+                                          f"got {v.show(given)}")
+    if name == "text":
+        return given, "inline CSV", f"{key}.text"
+    path = base_dir / given
+    try:
+        return read_text(path, what), str(path), f"{key}.file"
+    except SceneError as e:
+        raise SceneError(f"{key}.file", f"{path}: {str(e)[len(e.key) + 2:]}") from None
+
+
 def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc.Excitation:
     acc = exc.MAX_ACCEL
     accel = Bound(-acc, acc, unit="m/s²")
@@ -410,19 +429,14 @@ def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc
         return exc.constant(v.linear(f"{key}.accel", raw.get("accel", [0.0, 0.0, 0.0]), accel),
                             v.vector(f"{key}.angular_accel", raw.get("angular_accel", [0.0, 0.0, 0.0]), 3, alpha))
     if kind == "csv":
-        f = raw.get("file")
-        if not isinstance(f, str):
-            raise SceneError(f"{key}.file", f"expected a path to a CSV of time, ax, az, got {v.show(f)}")
+        text, path, where = _table(raw, key, base_dir, "CSV of time, ax, az")
         after = v.choice(f"{key}.after", raw["after"], exc.AFTER) if "after" in raw else None
-        ex = exc.read_csv(base_dir / f, f"{key}.file", v.boolean(f"{key}.hold", raw.get("hold", False)), after)
+        ex = exc.read_csv(text, path, where, v.boolean(f"{key}.hold", raw.get("hold", False)), after)
         if abs(ex.arrays.table[:, 1:]).max() > acc:
-            raise SceneError(f"{key}.file", f"accelerations must stay within ±{acc:g} m/s²")
+            raise SceneError(where, f"accelerations must stay within ±{acc:g} m/s²")
         return ex
     if kind == "pose-table":
-        f = raw.get("file")
-        if not isinstance(f, str):
-            raise SceneError(f"{key}.file", f"expected a path to a CSV pose table, got {v.show(f)}")
-        return exc.read_pose_table(base_dir / f, f"{key}.file")
+        return exc.read_pose_table(*_table(raw, key, base_dir, "CSV pose table"))
     start = v.number(f"{key}.start", raw.get("start", 0.0), 0.0, 1e5, unit="s")
     if kind == "pick-and-place":
         moves_raw = raw.get("moves")

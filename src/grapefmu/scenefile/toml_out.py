@@ -49,17 +49,19 @@ def dumps(doc: dict[str, Any]) -> str:
 
 def scene_toml(scene) -> str:
     """The TOML text that reads back as `scene`, for a recording or an FMU to name the scene that ran: the text it
-    was read from while that still describes it. For a scene changed in code since (`dataclasses.replace`), that
-    text with what a change in code commonly touches written anew (name, gravity, the berries and their initial
-    state, solver, thresholds) and read back to prove it. A change the document cannot carry that way (its
-    contacts, couplings, obstacles, excitation, or a berry's law its file derives from the berry) is refused, as is
-    a scene built in code without a document: write it as one (scene_from_dict) to record it."""
+    was read from while that still describes it and names no CSV file. Otherwise that document with a CSV table
+    inline (`text`, so a recording replays where the file is not) and what a change in code (`dataclasses.replace`)
+    commonly touches written anew (name, gravity, the berries and their initial state, solver, thresholds), read
+    back to prove it. A change the document cannot carry that way (its contacts, couplings, obstacles, excitation,
+    or a berry's law its file derives from the berry) is refused, as is a scene built in code without a document:
+    write it as one (scene_from_dict) to record it."""
     import tomllib
     from dataclasses import fields
 
     from ..errors import SceneError
     from .parse import parse_scene
-    if scene.source and scene.source_key == scene.key:
+    X = scene.excitation
+    if scene.source and scene.source_key == scene.key and not X.text:
         return scene.source
     if not scene.source:
         raise SceneError("source", "a scene built in code without a scene document cannot name itself in a recording "
@@ -81,6 +83,8 @@ def scene_toml(scene) -> str:
                    angle=list(q) if b.spherical else q[0], angular_velocity=list(w) if b.spherical else w[0])
     for section, settings in (("solver", scene.solver), ("thresholds", scene.thresholds)):
         doc[section] = {f.name: getattr(settings, f.name) for f in fields(settings)}
+    if X.text:  # a table read from a file travels with the scene: a recording replays where the file is not
+        doc["excitation"] = {**{k: v for k, v in doc.get("excitation", {}).items() if k != "file"}, "text": X.text}
     text = dumps(doc)
     try:
         again = parse_scene(text, name=scene.name).key
