@@ -90,10 +90,12 @@ def scene_toml(scene) -> str:
         again = parse_scene(text, name=scene.name).key
     except SceneError as e:
         again = e
+    if isinstance(again, SceneError):
+        raise SceneError("source", f"this scene, changed in code, is one its scene document would refuse ({again}); "
+                                   "make the change in the document (scenefile.scene_from_dict) to record it")
     if again != scene.key:
         raise SceneError("source", "this scene was changed in code beyond its name, gravity, berries, initial state, "
                                    "solver and thresholds (its contacts, couplings, obstacles or excitation), so the "
                                    "TOML it was read from no longer describes it; make the change in the scene "
-                                   "document (scenefile.scene_from_dict) to record it"
-                         + (f" (read back: {again})" if isinstance(again, SceneError) else ""))
+                                   "document (scenefile.scene_from_dict) to record it")
     return text
