@@ -306,7 +306,6 @@ def test_a_change_its_document_cannot_carry_is_refused_before_a_file_is_written(
     sc = load_scene(default_scene_path())
     m = sc.model
     heavier = replace(sc, model=replace(m, berries=(replace(m.berries[0], mass=0.02),) + m.berries[1:]))
-    assert heavier.model.pairs == m.pairs
     run = simulate(heavier, 0.05)
     with pytest.raises(SceneError, match="contacts") as e:
         write_mcap(run, tmp_path / "heavier.mcap")
@@ -323,8 +322,8 @@ def test_a_change_its_document_cannot_carry_is_refused_before_a_file_is_written(
                                         for p in default_scene_path().parent.rglob("*.toml")))
 def test_every_shipped_scene_reads_back_from_its_rewritten_document(path):
     """The writer's berries, initial state, solver and thresholds on every packaged scene (planar and spherical
-    berries, hinges on and off the rod, obstacles, the pick-and-place and still rachis): a scene renamed in code, with one
-    berry's damping and a threshold changed, is described by the document written for it."""
+    berries, hinges on and off the rod, obstacles, the pick-and-place and still rachis): a scene renamed in code,
+    with one berry's damping and a threshold changed, is described by the document written for it."""
     from dataclasses import replace
 
     from grapefmu.scenefile import parse_scene, scene_toml

@@ -59,21 +59,24 @@ def default_scene_path() -> Path:
     return Path(str(resources.files("grapefmu") / "scenes" / "default.toml"))
 
 
-def read_text(path: str | Path, what: str = "scene file") -> str:
-    """A small UTF-8 text file; a missing, unreadable, oversized or non-UTF-8 file is a SceneError naming it."""
+def read_text(path: str | Path, what: str = "scene file", key: str | None = None) -> str:
+    """A small UTF-8 text file; a missing, unreadable, oversized or non-UTF-8 file is a SceneError naming it (on
+    `key` with the path in its message, for a file a scene names; else on the path)."""
     path = Path(path)
+
+    def refused(why: str) -> SceneError:
+        return SceneError(key, f"{path}: {why}") if key else SceneError(str(path), why)
     try:
         with open(path, "rb") as fh:
             data = fh.read(MAX_FILE_BYTES + 1)
     except OSError as e:
-        raise SceneError(str(path), f"cannot read {what}: {e.strerror or e}") from None
+        raise refused(f"cannot read {what}: {e.strerror or e}") from None
     if len(data) > MAX_FILE_BYTES:
-        raise SceneError(str(path), f"a {what} of at most {MAX_FILE_BYTES // 2**20} MiB is expected; this one is larger")
+        raise refused(f"a {what} of at most {MAX_FILE_BYTES // 2**20} MiB is expected; this one is larger")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise SceneError(str(path), f"a {what} must be UTF-8 text; byte {data[e.start]:#04x} at offset {e.start} "
-                                    "is not") from None
+        raise refused(f"a {what} must be UTF-8 text; byte {data[e.start]:#04x} at offset {e.start} is not") from None
 
 
 def loads_toml(text: str, where: str = "<toml>") -> dict[str, Any]:
@@ -413,10 +416,7 @@ def _table(raw: dict, key: str, base_dir: Path, what: str) -> tuple[str, str, st
     if name == "text":
         return given, "inline CSV", f"{key}.text"
     path = base_dir / given
-    try:
-        return read_text(path, what), str(path), f"{key}.file"
-    except SceneError as e:
-        raise SceneError(f"{key}.file", f"{path}: {str(e)[len(e.key) + 2:]}") from None
+    return read_text(path, what, f"{key}.file"), str(path), f"{key}.file"
 
 
 def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc.Excitation:

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
+from dataclasses import fields
 from typing import Any
 
-from ..errors import GrapefmuError
+from ..errors import GrapefmuError, SceneError
+from .parse import parse_scene  # (parse imports dumps when it writes a scene built from a dict)
 
 
 def _value(v: Any) -> str:
@@ -55,11 +58,6 @@ def scene_toml(scene) -> str:
     back to prove it. A change the document cannot carry that way (its contacts, couplings, obstacles, excitation,
     or a berry's law its file derives from the berry) is refused, as is a scene built in code without a document:
     write it as one (scene_from_dict) to record it."""
-    import tomllib
-    from dataclasses import fields
-
-    from ..errors import SceneError
-    from .parse import parse_scene
     X = scene.excitation
     if scene.source and scene.source_key == scene.key and not X.text:
         return scene.source
@@ -77,7 +75,8 @@ def scene_toml(scene) -> str:
             raw.pop(f, None)
         raw.update(name=b.name, mass=b.mass, radius=b.radius, twig_length=b.twig_length,
                    hinge_stiffness=b.hinge_stiffness, hinge_damping=b.hinge_damping,
-                   **({"hinge": [b.hinge_x, b.hinge_y, b.hinge_z]} if b.hinge_y or b.hinge_z else {"hinge_x": b.hinge_x}),
+                   **({"hinge": [b.hinge_x, b.hinge_y, b.hinge_z]} if b.hinge_y or b.hinge_z
+                      else {"hinge_x": b.hinge_x}),
                    **({"kind": "spherical", "azimuth": b.azimuth, "rest_angles": list(b.rest_angles)}
                       if b.spherical else {}),
                    angle=list(q) if b.spherical else q[0], angular_velocity=list(w) if b.spherical else w[0])
