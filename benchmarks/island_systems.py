@@ -16,22 +16,22 @@ from grapefmu.solver import islands as isl
 def events(n: int) -> list[tuple[str, tuple[int, int, int, int]]]:
     """("form" | "retire", the system's shape (berries, angles, couplings, pairs)) in the order the run made them."""
     out = []
-    form, retire = isl.Islands._form, isl.Islands._retire
+    islands, retire = isl.Islands._islands, isl.Islands._retire
 
-    def formed(self, members, t, k0):
-        seg = form(self, members, t, k0)
-        out.append(("form", seg.system.shape))
-        return seg
+    def formed(self, *args):
+        segs, formation = islands(self, *args)
+        out.extend(("form", seg.system.shape) for seg in segs)
+        return segs, formation
 
-    def retired(self, seg):
-        out.append(("retire", seg.system.shape))
-        return retire(self, seg)
+    def retired(self, segs, *args):
+        out.extend(("retire", seg.system.shape) for seg in segs)
+        return retire(self, segs, *args)
 
-    isl.Islands._form, isl.Islands._retire = formed, retired
+    isl.Islands._islands, isl.Islands._retire = formed, retired
     try:
         isl.Islands(scene("cluster", n)).run()
     finally:
-        isl.Islands._form, isl.Islands._retire = form, retire
+        isl.Islands._islands, isl.Islands._retire = islands, retire
     return out
 
 

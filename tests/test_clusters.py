@@ -324,3 +324,30 @@ def test_islands_record_a_stepped_rachis_as_one_solver_does():
     np.testing.assert_array_equal(whole.accel[on_steps + 1, :3], rows[1:4, 1:])
     np.testing.assert_array_equal(run.accel, whole.accel)
     np.testing.assert_array_equal(run.impacts.pair, whole.impacts.pair)
+
+
+def test_a_windows_islands_get_exactly_their_own_parts():
+    """handover.parts, which finds every island of a window in one call, against sets: island k has the berries
+    labelled which[k] (ascending), their angles, the pairs with both bodies in it or one in it and the other an
+    obstacle (obstacles belong to every island), and the couplings with both ends in it; a pair or coupling across
+    islands, or of berries no island takes, is in none."""
+    from grapefmu.solver.handover import parts
+
+    sc = load_scene(Path(__file__).parents[1] / "src/grapefmu/scenes/setdown_fast.toml")
+    m, n = sc.model, sc.model.n_berries
+    pi, pj = np.array([p.i for p in m.pairs]), np.array([p.j for p in m.pairs])
+    coupled = np.array([(i, i + 1) for i in range(0, n - 1, 2)], dtype=np.int64)  # couplings of our own
+    rng = np.random.default_rng(3)
+    label = rng.integers(0, 6, n)
+    which = np.array([4, 0, 5, 2])  # not every label, in no order
+    members, m_off, dofs, d_off, pairs, p_off, couplings, c_off = parts(label, which, pi, pj, coupled, m.dof)
+    assert (pj >= n).any() and n > 10
+    for k, c in enumerate(which):
+        own = set(np.flatnonzero(label == c))
+        assert list(members[m_off[k]:m_off[k + 1]]) == sorted(own)
+        assert list(dofs[d_off[k]:d_off[k + 1]]) == [a for i in sorted(own) for a in range(m.dof[i], m.dof[i + 1])]
+        want = [p for p in range(len(pi)) if pi[p] in own and (pj[p] >= n or pj[p] in own)]
+        assert list(pairs[p_off[k]:p_off[k + 1]]) == want
+        both = [q for q, (i, j) in enumerate(coupled) if i in own and j in own]
+        assert list(couplings[c_off[k]:c_off[k + 1]]) == both
+    assert m_off[-1] == np.isin(label, which).sum() and p_off[-1] < len(pi)

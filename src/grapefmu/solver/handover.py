@@ -16,40 +16,90 @@ from ..physics.compiled import inline, jit
 from ..physics.layout import model_offsets
 from ..results.records import COUNTERS, COUNTS, PEAKS
 from .session import restart
+from .state import CHANGE
 
 #: the work counters' names, for literal_unroll
 COUNTED = tuple(COUNTERS.names)
 
 
 @jit
-def parts(members, inside, pair_i, pair_j, coupled, dof):
-    """An island's pairs, couplings and angles (scene indices, ascending) from its berries; inside: scratch, one
-    flag per scene body, the obstacles' set (they belong to every island)."""
-    n = dof.shape[0] - 1
-    inside[:n] = False
-    n_dofs = 0
-    for m in members:
-        inside[m] = True
-        n_dofs += dof[m + 1] - dof[m]
-    pairs = np.empty(pair_i.shape[0], np.int64)
-    n_pairs = 0
+def parts(label, which, pair_i, pair_j, coupled, dof):
+    """The islands to form: island k of the berries whose label is which[k]. Returns their berries, angles, pairs
+    and couplings (scene indices, each island's ascending), each concatenated over the islands with its offsets
+    (island k's berries are members[m_off[k]:m_off[k + 1]], ...). A pair belongs to the island of both its
+    berries, or of its berry where the other body is an obstacle (obstacles belong to every island). One call
+    for a window's islands: a call unboxes its arrays again, which cost more than finding one island's parts."""
+    n, K = label.shape[0], which.shape[0]
+    top = 0
+    for i in range(n):
+        top = max(top, label[i])
+    for c in which:
+        top = max(top, c)
+    slot = np.full(top + 1, -1, np.int64)
+    for k in range(K):
+        slot[which[k]] = k
+    island = np.empty(n, np.int64)  # each berry's island among those formed, or -1
+    for i in range(n):
+        island[i] = slot[label[i]]
+    m_off, d_off = np.zeros(K + 1, np.int64), np.zeros(K + 1, np.int64)
+    p_off, c_off = np.zeros(K + 1, np.int64), np.zeros(K + 1, np.int64)
+    pair_island = np.full(pair_i.shape[0], -1, np.int64)
     for p in range(pair_i.shape[0]):
-        if inside[pair_i[p]] and inside[pair_j[p]]:
-            pairs[n_pairs] = p
-            n_pairs += 1
-    couplings = np.empty(coupled.shape[0], np.int64)
-    n_couplings = 0
+        k = island[pair_i[p]]
+        if k >= 0 and (pair_j[p] >= n or island[pair_j[p]] == k):
+            pair_island[p] = k
+    coupling_island = np.full(coupled.shape[0], -1, np.int64)
     for c in range(coupled.shape[0]):
-        if inside[coupled[c, 0]] and inside[coupled[c, 1]]:
-            couplings[n_couplings] = c
-            n_couplings += 1
-    dofs = np.empty(n_dofs, np.int64)
-    r = 0
-    for m in members:
-        for a in range(dof[m], dof[m + 1]):
-            dofs[r] = a
-            r += 1
-    return pairs[:n_pairs].copy(), couplings[:n_couplings].copy(), dofs
+        k = island[coupled[c, 0]]
+        if k >= 0 and island[coupled[c, 1]] == k:
+            coupling_island[c] = k
+    for i in range(n):
+        if island[i] >= 0:
+            m_off[island[i] + 1] += 1
+            d_off[island[i] + 1] += dof[i + 1] - dof[i]
+    for p in range(pair_i.shape[0]):
+        if pair_island[p] >= 0:
+            p_off[pair_island[p] + 1] += 1
+    for c in range(coupled.shape[0]):
+        if coupling_island[c] >= 0:
+            c_off[coupling_island[c] + 1] += 1
+    for k in range(K):
+        m_off[k + 1] += m_off[k]
+        d_off[k + 1] += d_off[k]
+        p_off[k + 1] += p_off[k]
+        c_off[k + 1] += c_off[k]
+    members, dofs = np.empty(m_off[K], np.int64), np.empty(d_off[K], np.int64)
+    pairs, couplings = np.empty(p_off[K], np.int64), np.empty(c_off[K], np.int64)
+    m_at, d_at, p_at, c_at = m_off[:K].copy(), d_off[:K].copy(), p_off[:K].copy(), c_off[:K].copy()
+    for i in range(n):  # ascending within each island
+        k = island[i]
+        if k >= 0:
+            members[m_at[k]] = i
+            m_at[k] += 1
+            for a in range(dof[i], dof[i + 1]):
+                dofs[d_at[k]] = a
+                d_at[k] += 1
+    for p in range(pair_i.shape[0]):
+        k = pair_island[p]
+        if k >= 0:
+            pairs[p_at[k]] = p
+            p_at[k] += 1
+    for c in range(coupled.shape[0]):
+        k = coupling_island[c]
+        if k >= 0:
+            couplings[c_at[k]] = c
+            c_at[k] += 1
+    return members, m_off, dofs, d_off, pairs, p_off, couplings, c_off
+
+
+@jit
+def form_all(sessions, slots, P, G, parted, local, scene_offsets, t, grid_t0, grid_dt, k0, grid_end):
+    """`form` of island k of `parted` (what `parts` returned) in sessions[slots[k]], for every k."""
+    members, m_off, dofs, d_off, pairs, p_off, couplings, c_off = parted
+    for k in range(slots.shape[0]):
+        form(sessions[slots[k]], P, G, members[m_off[k]:m_off[k + 1]], dofs[d_off[k]:d_off[k + 1]],
+             pairs[p_off[k]:p_off[k + 1]], couplings[c_off[k]:c_off[k + 1]], local, scene_offsets, t, grid_t0,
+             grid_dt, k0, grid_end)
 
 
 @jit
@@ -198,12 +248,13 @@ def flush_all(sessions, scene_offsets, y, accel, totals):
 
 
 @jit
-def retire(s, G, scene_offsets, y, accel, totals, later, ledger_later, counters):
+def retire(s, G, scene_offsets, y, accel, totals, later, ledger_later, counters, changes):
     """Island session s's state back into the scene's G (scatter) and its last samples into the run's arrays
     (flush). What it closed with holds for every later sample: its totals go into `later` and its energy integrals
     (contacts, work) into `ledger_later`, at the sample after its last (the run sums and raises them over the samples
-    after, Islands._assemble). Its work counters are added to `counters` ((1,) COUNTERS). Returns its contact
-    changes (a copy; each at its sample of the run's grid) and its steps."""
+    after, Islands._assemble). Its work counters are added to `counters` ((1,) COUNTERS), its contact changes (each
+    at its sample of the run's grid, its pair the scene's) written to `changes` from the start. Returns how many
+    changes and its steps."""
     flush(s, scene_offsets, y, accel, totals)
     scatter(s, G)
     done, c = s.state.book.counters[0], counters[0]
@@ -216,7 +267,29 @@ def retire(s, G, scene_offsets, y, accel, totals, later, ledger_later, counters)
     Y = S.physical.y
     ledger_later[after, 0] += Y[o_contact]
     ledger_later[after, 1] += Y[o_work]
-    return R.changes[:R.cursor[0].n_changes].copy(), done.steps
+    nc, pairs = R.cursor[0].n_changes, s.buffers.pairs
+    for r in range(nc):
+        changes[r] = R.changes[r]
+        changes[r].pair = pairs[R.changes[r].pair]
+    return nc, done.steps
+
+
+@jit
+def retire_all(sessions, slots, G, scene_offsets, y, accel, totals, later, ledger_later, counters):
+    """`retire` of sessions[slots[k]] for every k, in that order. Returns their contact changes, concatenated, and
+    each one's steps."""
+    total = 0
+    for k in range(slots.shape[0]):
+        total += sessions[slots[k]].scratch.cursor[0].n_changes
+    changes = np.empty(total, CHANGE)
+    steps = np.empty(slots.shape[0], np.int64)
+    at = 0
+    for k in range(slots.shape[0]):
+        nc, done = retire(sessions[slots[k]], G, scene_offsets, y, accel, totals, later, ledger_later, counters,
+                          changes[at:])
+        steps[k] = done
+        at += nc
+    return changes, steps
 
 
 @inline

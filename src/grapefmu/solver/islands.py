@@ -31,7 +31,7 @@ from . import session as ses
 from . import state as st
 from .loop import IMPACTS_FULL, OUT_FULL, grid_last
 from .drift import components, slack
-from .handover import flush_all, form, parts, retire
+from .handover import flush_all, form_all, parts, retire_all
 from .solver import STATUS_TEXT, Solver, open_impacts, run_stats
 
 #: the default window, s: long enough that a window's calls cost little against its steps, short enough that
@@ -60,18 +60,17 @@ class _System:
 
 class _Segment:
     """One island over the windows it lived through: its berries and pairs (scene indices, as Python reads them;
-    its compiled side holds them too, with its map of the scene's components, handover.form), its system, and what it
-    recorded that the run assembles last (its impacts and contact changes; its samples go into the run's arrays at
-    each window's start and when it retires, handover.flush)."""
+    its compiled side holds them too, with its map of the scene's components, handover.form), its system, and the
+    impacts it recorded, which the run assembles last (its samples go into the run's arrays at each window's start
+    and, with its contact changes, when it retires: handover.flush, retire)."""
 
-    __slots__ = ("members", "pairs", "system", "impacts", "window", "changes")
+    __slots__ = ("members", "pairs", "system", "impacts", "window")
 
     def __init__(self, members, pairs, system):
         self.members, self.pairs = members, pairs
         self.system = system
         self.impacts: list[np.ndarray] = []   # finished impacts of the windows kept
         self.window: list[np.ndarray] = []    # ... of the window in progress
-        self.changes = None                   # when it retired: its contact changes
 
 
 class _Batch:
@@ -79,11 +78,13 @@ class _Batch:
     (each holding its berries and pairs in the scene, handover.form), what each island's window returned, and each
     berry's island (label; berries of no island in the batch keep what they held)."""
 
-    def __init__(self, segs: list[_Segment], n: int):
+    def __init__(self, segs: list[_Segment], n: int, formation: Callable):
+        """A batch of these islands, formed in it by formation (Islands._islands)."""
         self.segs = list(segs)
         self.sessions = ses.listed(segs[0].system.session)
         for k, seg in enumerate(segs[1:], 1):
             ses.put(self.sessions, k, seg.system.session)
+        formation(self.sessions, np.arange(len(segs)))
         self.label = np.zeros(n, dtype=np.int64)
         self._index()
 
@@ -94,20 +95,27 @@ class _Batch:
         self.n_impacts = np.zeros(k, dtype=np.int64)
         ses.labels(self.sessions, self.label)
 
-    def replace(self, out: list[_Segment], new: list[_Segment], ran: _Batch | None = None) -> None:
-        """Islands out leave, islands new come (the sessions list changed in place: rebuilding it costs more). Within
-        a window (ran: the batch the new islands ran in) each island keeps its saved cursor, for a later rollback."""
+    def replace(self, out: list[_Segment], new: list[_Segment], formation: Callable | None = None,
+                ran: _Batch | None = None) -> None:
+        """Islands out leave, islands new come (the sessions list changed in place: rebuilding it costs more), formed
+        here by formation, or within a window already formed and run in the batch ran, where each island keeps its
+        saved cursor, for a later rollback."""
         where = {id(s): k for k, s in enumerate(self.segs)}
         if ran is not None:  # each island's saved cursor, by where it was: here or in ran
             before = np.concatenate([self.saved, ran.saved])
             where_before = where | {id(s): len(self.segs) + k for k, s in enumerate(ran.segs)}
         slots = sorted(where[id(s)] for s in out)
+        placed = []
         for k, seg in zip(slots, new):
             self.segs[k] = seg
             ses.put(self.sessions, k, seg.system.session)
+            placed.append(k)
         for seg in new[len(slots):]:
             self.segs.append(seg)
             ses.put(self.sessions, len(self.segs) - 1, seg.system.session)
+            placed.append(len(self.segs) - 1)
+        if formation is not None:
+            formation(self.sessions, np.array(placed, dtype=np.int64))
         for k in reversed(slots[len(new):]):  # the last island moves into the free slot
             last = len(self.segs) - 1
             if k != last:
@@ -145,7 +153,6 @@ class Islands:
         self.coupled = np.array([(c.i, c.j) for c in m.couplings], dtype=int).reshape(-1, 2)
         self.dof = m.dof
         self.free: dict[tuple[int, ...], list[_System]] = {}  # systems out of use, by shape
-        self.inside = np.ones(self.n + len(m.obstacles), dtype=bool)  # scratch: the island's bodies
         self.local = np.zeros(self.n + len(m.obstacles), dtype=np.int64)  # scratch: scene body -> island's
 
     # --- the state between islands (scene indices) ----------------------------------------------------------
@@ -168,33 +175,45 @@ class Islands:
         self.ledger_later = np.zeros((n + 1, 2))
         self.counters = np.zeros(1, dtype=st.COUNTERS)
         self.segments: list[_Segment] = []
+        self.changes: list[np.ndarray] = []  # the retired islands' contact changes, in the order they retired
         self.formed = self.rollbacks = self.berry_steps = 0
 
-    def _retire(self, seg: _Segment) -> None:
-        """Put a segment's state into the scene's and its samples into the run's arrays, keep its contact changes
-        and free its system."""
-        system = seg.system
-        seg.changes, steps = retire(system.session, self.G, self.scene_offsets, self.y, self.accel, self.totals,
+    def _retire(self, segs: list[_Segment], slots: np.ndarray, sessions) -> None:
+        """Put the state of these segments (at slots of the sessions list) into the scene's and their samples into
+        the run's arrays, keep their contact changes and free their systems: one compiled call for them all."""
+        changes, steps = retire_all(sessions, slots, self.G, self.scene_offsets, self.y, self.accel, self.totals,
                                     self.later, self.ledger_later, self.counters)
-        self.berry_steps += len(seg.members) * steps
-        seg.impacts += seg.window
-        seg.window = []
-        self.segments.append(seg)
-        self.free.setdefault(system.shape, []).append(system)
+        self.changes.append(changes)
+        for seg, n_steps in zip(segs, steps.tolist()):
+            self.berry_steps += len(seg.members) * n_steps
+            seg.impacts += seg.window
+            seg.window = []
+            self.segments.append(seg)
+            self.free.setdefault(seg.system.shape, []).append(seg.system)
 
-    def _form(self, members: np.ndarray, t: float, k0: int) -> _Segment:
-        """An island of these berries (ascending) at time t, from the scene's state, recording from sample k0."""
-        pairs, couplings, dofs = parts(members, self.inside, self.pair_owner, self.pair_other, self.coupled, self.dof)
-        shape = (len(members), len(dofs), len(couplings), len(pairs))
-        pool = self.free.get(shape)
-        # a recorder holds one window's samples (flushed at the next window's start): a few kilobytes that the
-        # allocator hands back, where room for the rest of the run was fresh pages, faulted in for every system
-        system = pool.pop() if pool else _System(self.whole, *shape, self.per + 1)
-        w = self.whole
-        form(system.session, w.M, self.G, members, dofs, pairs, couplings, self.local, self.scene_offsets, t, self.t0,
-             self.dt, k0, self.t_end)
-        self.formed += 1
-        return _Segment(members, pairs, system)
+    def _islands(self, label: np.ndarray, which: np.ndarray, t: float, k0: int) -> tuple[list[_Segment], Callable]:
+        """Islands at time t, recording from sample k0: island k of the berries labelled which[k]. Returns their
+        segments and the call that forms them, from the scene's state, once their sessions are in a list
+        (formation(sessions, slots): handover.form_all)."""
+        parted = parts(label, which, self.pair_owner, self.pair_other, self.coupled, self.dof)
+        members, m_off, dofs, d_off, pairs, p_off, couplings, c_off = parted
+        m, d, p, c = m_off.tolist(), d_off.tolist(), p_off.tolist(), c_off.tolist()
+        segs = []
+        for k in range(len(which)):
+            shape = (m[k + 1] - m[k], d[k + 1] - d[k], c[k + 1] - c[k], p[k + 1] - p[k])
+            pool = self.free.get(shape)
+            # a recorder holds one window's samples (flushed at the next window's start): a few kilobytes that the
+            # allocator hands back, where room for the rest of the run was fresh pages, faulted in for every system
+            system = pool.pop() if pool else _System(self.whole, *shape, self.per + 1)
+            segs.append(_Segment(members[m[k]:m[k + 1]], pairs[p[k]:p[k + 1]], system))
+        self.formed += len(segs)
+        M, G, local, offsets = self.whole.M, self.G, self.local, self.scene_offsets
+        t0, dt, t_end = self.t0, self.dt, self.t_end
+
+        def formation(sessions, slots: np.ndarray) -> None:
+            form_all(sessions, slots, M, G, parted, local, offsets, t, t0, dt, k0, t_end)
+
+        return segs, formation
 
     # --- windows ----------------------------------------------------------------------------------------------
     def _run(self, batch: _Batch, t_w: float) -> None:
@@ -245,7 +264,8 @@ class Islands:
         if b is None:
             ses.preview(self.whole._session, t_w - t, np.arange(self.n), self.lin, self.reach)
             comp = self._components(self._slack(t_w - t), np.zeros(self.n, dtype=np.int64))
-            self.batch = _Batch([self._form(np.flatnonzero(comp == c), t, k) for c in np.unique(comp)], self.n)
+            segs, formation = self._islands(comp, np.unique(comp), t, k)
+            self.batch = _Batch(segs, self.n, formation)
             return
         ses.previews(b.sessions, t_w - t, self.lin, self.reach)
         comp = self._components(self._slack(t_w - t), b.label)
@@ -255,12 +275,12 @@ class Islands:
         c = comp[np.argsort(b.label, kind="stable")]  # by island
         lo, hi = np.minimum.reduceat(c, starts), np.maximum.reduceat(c, starts)
         kept = (lo == hi) & (np.bincount(comp)[lo] == size)  # the same berries, no more
-        out = [b.segs[k] for k in np.flatnonzero(~kept)]
-        if out:
-            for seg in out:
-                self._retire(seg)
+        slots = np.flatnonzero(~kept)
+        if len(slots):
+            out = [b.segs[m] for m in slots]
+            self._retire(out, slots, b.sessions)
             moved = np.concatenate([seg.members for seg in out])
-            b.replace(out, [self._form(np.flatnonzero(comp == c), t, k) for c in np.unique(comp[moved])])
+            b.replace(out, *self._islands(comp, np.unique(comp[moved]), t, k))
 
     def _window(self, t: float, t_w: float, k: int) -> None:
         """Run every island to t_w; where berries of different islands could have met, roll their islands back and
@@ -284,19 +304,17 @@ class Islands:
             groups: dict[int, list[int]] = {}
             for m in np.flatnonzero(size[comp] > 1):
                 groups.setdefault(comp[m], []).append(m)
-            out, new = [], []
-            for members in groups.values():
-                for m in members:
-                    seg = b.segs[m]
-                    ses.rollback(seg.system.session, b.saved[m])
-                    seg.window = []
-                    self._retire(seg)
-                    out.append(seg)
-                self.rollbacks += 1
-                new.append(self._form(np.sort(np.concatenate([b.segs[m].members for m in members])), t, k))
-            ran = _Batch(new, self.n)
+            slots = np.array([m for members in groups.values() for m in members], dtype=np.int64)
+            out = [b.segs[m] for m in slots]
+            for m, seg in zip(slots, out):
+                ses.rollback(seg.system.session, b.saved[m])
+                seg.window = []
+            self._retire(out, slots, b.sessions)
+            self.rollbacks += len(groups)
+            new, formation = self._islands(comp[label], np.array(list(groups), dtype=np.int64), t, k)
+            ran = _Batch(new, self.n, formation)
             self._run(ran, t_w)
-            b.replace(out, new, ran)
+            b.replace(out, new, ran=ran)
 
     # --- the run ----------------------------------------------------------------------------------------------
     def run(self, t_end: float | None = None, output_interval: float | None = None,
@@ -327,8 +345,8 @@ class Islands:
             k = k_w
             if progress:
                 progress(t_w, t_end)
-        for seg in self.batch.segs if self.batch else ():
-            self._retire(seg)
+        if self.batch:
+            self._retire(self.batch.segs, np.arange(len(self.batch.segs)), self.batch.sessions)
         return self._assemble(t_end, time.perf_counter() - wall_start)
 
     def _assemble(self, t_end: float, wall: float) -> Run:
@@ -343,17 +361,14 @@ class Islands:
             totals[f] += np.cumsum(later[f])
         for f in PEAKS:
             np.maximum(totals[f], np.maximum.accumulate(later[f]), out=totals[f])
-        finished, changes = [], []
+        finished = []
         for seg in self.segments:
-            ch = seg.changes
-            ch["pair"] = seg.pairs[ch["pair"]]
-            changes.append(ch)
             for rec in seg.impacts:
                 rec = rec.copy()
                 rec["pair"] = seg.pairs[rec["pair"]]
                 finished.append(rec)
         ongoing = open_impacts(self.G[1], self.G[2], t[-1])
-        changes = concat(changes) if changes else np.zeros(0, dtype=st.CHANGE)
+        changes = concat(self.changes) if self.changes else np.zeros(0, dtype=st.CHANGE)
         log = ContactLog(self.contacts0, changes[np.argsort(changes["sample"], kind="stable")])
         impacts = concat(finished) if finished else np.zeros(0, dtype=IMPACT)
         impacts = impacts[np.argsort(impacts["end"], kind="stable")]
