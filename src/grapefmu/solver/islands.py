@@ -95,36 +95,38 @@ class _Batch:
         self.n_impacts = np.zeros(k, dtype=np.int64)
         ses.labels(self.sessions, self.label)
 
-    def replace(self, out: list[_Segment], new: list[_Segment], formation: Callable | None = None,
+    def replace(self, slots: list[int], new: list[_Segment], formation: Callable | None = None,
                 ran: _Batch | None = None) -> None:
-        """Islands out leave, islands new come (the sessions list changed in place: rebuilding it costs more), formed
-        here by formation, or within a window already formed and run in the batch ran, where each island keeps its
-        saved cursor, for a later rollback."""
-        where = {id(s): k for k, s in enumerate(self.segs)}
-        if ran is not None:  # each island's saved cursor, by where it was: here or in ran
-            before = np.concatenate([self.saved, ran.saved])
-            where_before = where | {id(s): len(self.segs) + k for k, s in enumerate(ran.segs)}
-        slots = sorted(where[id(s)] for s in out)
+        """The islands at these slots leave, islands new come (the sessions list changed in place: rebuilding it costs
+        more), formed here by formation, or within a window already formed and run in the batch ran (new, in order),
+        where each island keeps its saved cursor, for a later rollback."""
+        slots = sorted(slots)
+        n = len(self.segs)
+        src = list(range(n))  # where each island's saved cursor is: here (< n), or n + its index in ran
         placed = []
-        for k, seg in zip(slots, new):
-            self.segs[k] = seg
+        for j, seg in enumerate(new):
+            if j < len(slots):
+                k = slots[j]
+                self.segs[k], src[k] = seg, n + j
+            else:
+                k = len(self.segs)
+                self.segs.append(seg)
+                src.append(n + j)
             ses.put(self.sessions, k, seg.system.session)
             placed.append(k)
-        for seg in new[len(slots):]:
-            self.segs.append(seg)
-            ses.put(self.sessions, len(self.segs) - 1, seg.system.session)
-            placed.append(len(self.segs) - 1)
         if formation is not None:
             formation(self.sessions, np.array(placed, dtype=np.int64))
         for k in reversed(slots[len(new):]):  # the last island moves into the free slot
             last = len(self.segs) - 1
             if k != last:
-                self.segs[k] = self.segs[last]
+                self.segs[k], src[k] = self.segs[last], src[last]
             self.segs.pop()
+            src.pop()
             ses.take_last(self.sessions, k)
+        saved = self.saved
         self._index()
         if ran is not None:
-            self.saved[:] = before[[where_before[id(seg)] for seg in self.segs]]
+            self.saved[:] = np.concatenate([saved, ran.saved])[src]
 
 
 class Islands:
@@ -280,7 +282,7 @@ class Islands:
             out = [b.segs[m] for m in slots]
             self._retire(out, slots, b.sessions)
             moved = np.concatenate([seg.members for seg in out])
-            b.replace(out, *self._islands(comp, np.unique(comp[moved]), t, k))
+            b.replace(slots.tolist(), *self._islands(comp, np.unique(comp[moved]), t, k))
 
     def _window(self, t: float, t_w: float, k: int) -> None:
         """Run every island to t_w; where berries of different islands could have met, roll their islands back and
@@ -314,7 +316,7 @@ class Islands:
             new, formation = self._islands(comp[label], np.array(list(groups), dtype=np.int64), t, k)
             ran = _Batch(new, self.n, formation)
             self._run(ran, t_w)
-            b.replace(out, new, ran=ran)
+            b.replace(slots.tolist(), new, ran=ran)
 
     # --- the run ----------------------------------------------------------------------------------------------
     def run(self, t_end: float | None = None, output_interval: float | None = None,
