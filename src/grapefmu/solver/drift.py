@@ -142,3 +142,53 @@ def components(n, a, b, label):
         else:
             label[v] = label[r]
     return count
+
+
+@jit
+def joined(n, engaged, pair_index, slack, label, pair_i, pair_j, coupled, join, stay, out):
+    """Each of n berries' group for the next window into out (components' labels): berries joined by a pair engaged
+    (in contact or in a Zeno window), a coupling, or a pair whose slack is below join; a pair of one island now (label)
+    stays joined while its slack is below stay. slack: per berry-berry pair (pair_i, pair_j, the scene's pair
+    pair_index, whose engaged flag it reads)."""
+    a = np.empty(pair_i.shape[0] + coupled.shape[0], np.int64)
+    b = np.empty_like(a)
+    m = 0
+    for p in range(pair_i.shape[0]):
+        i, j = pair_i[p], pair_j[p]
+        if engaged[pair_index[p]] or slack[p] < join or (label[i] == label[j] and slack[p] < stay):
+            a[m], b[m] = i, j
+            m += 1
+    for c in range(coupled.shape[0]):
+        a[m], b[m] = coupled[c, 0], coupled[c, 1]
+        m += 1
+    return components(n, a[:m], b[:m], out)
+
+
+@jit
+def regrouped(group, label, n_islands):
+    """The islands (0 … n_islands - 1; label: each berry's) whose berries group otherwise for the next window (group:
+    each berry's, from `joined`), ascending, and the groups their berries form, ascending: the islands to retire and
+    those to form. An island is kept where its berries make one group and no other berry joins it."""
+    n_groups = 0
+    for i in range(group.shape[0]):
+        n_groups = max(n_groups, group[i] + 1)
+    first = np.full(n_islands, -1, np.int64)  # each island's group, where its berries make one
+    split = np.zeros(n_islands, np.bool_)
+    size = np.zeros(n_islands, np.int64)
+    group_size = np.zeros(n_groups, np.int64)
+    for i in range(group.shape[0]):
+        k, g = label[i], group[i]
+        size[k] += 1
+        group_size[g] += 1
+        if first[k] < 0:
+            first[k] = g
+        elif first[k] != g:
+            split[k] = True
+    leaving = np.zeros(n_islands, np.bool_)
+    for k in range(n_islands):
+        leaving[k] = split[k] or group_size[first[k]] != size[k]
+    forming = np.zeros(n_groups, np.bool_)
+    for i in range(group.shape[0]):
+        if leaving[label[i]]:
+            forming[group[i]] = True
+    return np.flatnonzero(leaving), np.flatnonzero(forming)

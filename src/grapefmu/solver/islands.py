@@ -30,7 +30,7 @@ from ..results.run import Run
 from . import session as ses
 from . import state as st
 from .loop import IMPACTS_FULL, OUT_FULL, grid_last
-from .drift import components, slack
+from .drift import components, joined, regrouped, slack
 from .handover import flush_all, form_all, parts, retire_all
 from .solver import STATUS_TEXT, Solver, open_impacts, run_stats
 
@@ -251,12 +251,10 @@ class Islands:
         """Each berry's island for the next window (a label): berries joined by a pair in contact or in a Zeno window,
         a coupling, or a pair whose slack is below JOIN; a pair of one island (label) stays joined while its slack
         is below STAY, so that islands do not form and part on every window."""
-        i, j = self.pair_i, self.pair_j
-        join = self.engaged[self.pair_index] | (slack < JOIN) | ((label[i] == label[j]) & (slack < STAY))
-        label = np.empty(self.n, dtype=np.int64)
-        components(self.n, np.concatenate([i[join], self.coupled[:, 0]]), np.concatenate([j[join], self.coupled[:, 1]]),
-                   label)
-        return label
+        group = np.empty(self.n, dtype=np.int64)
+        joined(self.n, self.engaged, self.pair_index, slack, label, self.pair_i, self.pair_j, self.coupled, JOIN, STAY,
+               group)
+        return group
 
     def _regroup(self, t: float, t_w: float, k: int) -> None:
         """Islands for the window [t, t_w]: predict every berry's path (its drift taken from the last window), retire
@@ -271,18 +269,10 @@ class Islands:
             return
         ses.previews(b.sessions, t_w - t, self.lin, self.reach)
         comp = self._components(self._slack(t_w - t), b.label)
-        size = np.bincount(b.label, minlength=len(b.segs))
-        starts = np.zeros(len(b.segs), dtype=np.int64)
-        np.cumsum(size[:-1], out=starts[1:])
-        c = comp[np.argsort(b.label, kind="stable")]  # by island
-        lo, hi = np.minimum.reduceat(c, starts), np.maximum.reduceat(c, starts)
-        kept = (lo == hi) & (np.bincount(comp)[lo] == size)  # the same berries, no more
-        slots = np.flatnonzero(~kept)
+        slots, which = regrouped(comp, b.label, len(b.segs))
         if len(slots):
-            out = [b.segs[m] for m in slots]
-            self._retire(out, slots, b.sessions)
-            moved = np.concatenate([seg.members for seg in out])
-            b.replace(slots.tolist(), *self._islands(comp, np.unique(comp[moved]), t, k))
+            self._retire([b.segs[m] for m in slots], slots, b.sessions)
+            b.replace(slots.tolist(), *self._islands(comp, which, t, k))
 
     def _window(self, t: float, t_w: float, k: int) -> None:
         """Run every island to t_w; where berries of different islands could have met, roll their islands back and
