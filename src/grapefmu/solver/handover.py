@@ -30,19 +30,9 @@ def parts(label, which, pair_i, pair_j, coupled, dof):
     berries, or of its berry where the other body is an obstacle (obstacles belong to every island). One call
     for a window's islands: a call unboxes its arrays again, which cost more than finding one island's parts."""
     n, K = label.shape[0], which.shape[0]
-    top = 0
-    for i in range(n):
-        top = max(top, label[i])
-    for c in which:
-        top = max(top, c)
-    slot = np.full(top + 1, -1, np.int64)
-    for k in range(K):
-        slot[which[k]] = k
-    island = np.empty(n, np.int64)  # each berry's island among those formed, or -1
-    for i in range(n):
-        island[i] = slot[label[i]]
-    m_off, d_off = np.zeros(K + 1, np.int64), np.zeros(K + 1, np.int64)
-    p_off, c_off = np.zeros(K + 1, np.int64), np.zeros(K + 1, np.int64)
+    slot = np.full(max(label.max(), which.max()) + 1, -1, np.int64)
+    slot[which] = np.arange(K)
+    island = slot[label]  # each berry's island among those formed, or -1
     pair_island = np.full(pair_i.shape[0], -1, np.int64)
     for p in range(pair_i.shape[0]):
         k = island[pair_i[p]]
@@ -53,43 +43,39 @@ def parts(label, which, pair_i, pair_j, coupled, dof):
         k = island[coupled[c, 0]]
         if k >= 0 and island[coupled[c, 1]] == k:
             coupling_island[c] = k
-    for i in range(n):
-        if island[i] >= 0:
-            m_off[island[i] + 1] += 1
-            d_off[island[i] + 1] += dof[i + 1] - dof[i]
-    for p in range(pair_i.shape[0]):
-        if pair_island[p] >= 0:
-            p_off[pair_island[p] + 1] += 1
-    for c in range(coupled.shape[0]):
-        if coupling_island[c] >= 0:
-            c_off[coupling_island[c] + 1] += 1
+    members, m_off = _grouped(island, K)
+    pairs, p_off = _grouped(pair_island, K)
+    couplings, c_off = _grouped(coupling_island, K)
+    d_off = np.zeros(K + 1, np.int64)
     for k in range(K):
-        m_off[k + 1] += m_off[k]
-        d_off[k + 1] += d_off[k]
-        p_off[k + 1] += p_off[k]
-        c_off[k + 1] += c_off[k]
-    members, dofs = np.empty(m_off[K], np.int64), np.empty(d_off[K], np.int64)
-    pairs, couplings = np.empty(p_off[K], np.int64), np.empty(c_off[K], np.int64)
-    m_at, d_at, p_at, c_at = m_off[:K].copy(), d_off[:K].copy(), p_off[:K].copy(), c_off[:K].copy()
-    for i in range(n):  # ascending within each island
-        k = island[i]
-        if k >= 0:
-            members[m_at[k]] = i
-            m_at[k] += 1
-            for a in range(dof[i], dof[i + 1]):
-                dofs[d_at[k]] = a
-                d_at[k] += 1
-    for p in range(pair_i.shape[0]):
-        k = pair_island[p]
-        if k >= 0:
-            pairs[p_at[k]] = p
-            p_at[k] += 1
-    for c in range(coupled.shape[0]):
-        k = coupling_island[c]
-        if k >= 0:
-            couplings[c_at[k]] = c
-            c_at[k] += 1
+        d_off[k + 1] = d_off[k]
+        for m in members[m_off[k]:m_off[k + 1]]:
+            d_off[k + 1] += dof[m + 1] - dof[m]
+    dofs = np.empty(d_off[K], np.int64)
+    r = 0
+    for m in members:
+        for a in range(dof[m], dof[m + 1]):
+            dofs[r] = a
+            r += 1
     return members, m_off, dofs, d_off, pairs, p_off, couplings, c_off
+
+
+@inline
+def _grouped(owner, K):
+    """The items each of K groups owns (owner[i]: item i's group, or -1), ascending within each group and concatenated,
+    and the groups' offsets in that."""
+    off = np.zeros(K + 1, np.int64)
+    for g in owner:
+        if g >= 0:
+            off[g + 1] += 1
+    for k in range(K):
+        off[k + 1] += off[k]
+    out, at = np.empty(off[K], np.int64), off[:K].copy()
+    for i in range(owner.shape[0]):
+        if owner[i] >= 0:
+            out[at[owner[i]]] = i
+            at[owner[i]] += 1
+    return out, off
 
 
 @jit

@@ -248,9 +248,8 @@ class Islands:
         return self.slack
 
     def _components(self, slack: np.ndarray, label: np.ndarray) -> np.ndarray:
-        """Each berry's island for the next window (a label): berries joined by a pair in contact or in a Zeno window,
-        a coupling, or a pair whose slack is below JOIN; a pair of one island (label) stays joined while its slack
-        is below STAY, so that islands do not form and part on every window."""
+        """Each berry's island for the next window (a label; drift.joined's rules, with JOIN and STAY: a pair of one
+        island stays joined up to the larger STAY, so that islands do not form and part on every window)."""
         group = np.empty(self.n, dtype=np.int64)
         joined(self.n, self.engaged, self.pair_index, slack, label, self.pair_i, self.pair_j, self.coupled, JOIN, STAY,
                group)
