@@ -88,10 +88,8 @@ def scene_toml(scene) -> str:
     try:
         again = parse_scene(text, name=scene.name).key
     except SceneError as e:
-        again = e
-    if isinstance(again, SceneError):
-        raise SceneError("source", f"this scene, changed in code, is one its scene document would refuse ({again}); "
-                                   "make the change in the document (scenefile.scene_from_dict) to record it")
+        raise SceneError("source", f"this scene, changed in code, is one its scene document would refuse ({e}); "
+                                   "make the change in the document (scenefile.scene_from_dict) to record it") from None
     if again != scene.key:
         raise SceneError("source", "this scene was changed in code beyond its name, gravity, berries, initial state, "
                                    "solver and thresholds (its contacts, couplings, obstacles or excitation), so the "
