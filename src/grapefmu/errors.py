@@ -15,6 +15,7 @@ class SceneError(GrapefmuError, ValueError):
 
     def __init__(self, key: str, message: str):
         self.key = key
+        self.why = message
         super().__init__(f"{key}: {message}")
 
 

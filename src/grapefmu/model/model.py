@@ -73,6 +73,9 @@ MAX_SWING = math.radians(80.0)
 #: a berry's initial angle (each of a spherical berry's two) and angular velocity
 ANGLE = Bound(-math.pi, math.pi, unit="rad")
 ANGULAR_VELOCITY = Bound(-1e3, 1e3, unit="rad/s")
+#: the deepest overlap a start (or a planar scene's hanging rest) may hold, as a fraction of the smaller radius: a
+#: contact law means nothing far beyond it, and such a start flings the berries apart with energy nobody gave them
+MAX_OVERLAP_FRACTION = 0.2
 
 
 #: the shapes an obstacle can have (OBSTACLE.kind is the index)
@@ -458,7 +461,7 @@ class Scene:
 
     def __post_init__(self):
         why = (self.model.refusal or self.refuses_state() or self.solver.refusal() or refusal(self.thresholds, "thresholds")
-               or self.refuses_excitation() or self.model.refuses_turn(self.excitation))
+               or self.refuses_excitation() or self.model.refuses_turn(self.excitation) or self.refuses_overlap())
         if why:
             raise SceneError(*why)
         if self.source and not self.source_key:
@@ -493,6 +496,41 @@ class Scene:
             why = b.refuses_swing(f"angles[{first}]", "swing", self.angles[first])
             if why:
                 return why
+        return None
+
+    def refuses_overlap(self) -> tuple[str, str] | None:
+        """(key, why) for a start, or a planar scene's hanging rest, in which two berries, or a berry and an obstacle,
+        overlap by more than MAX_OVERLAP_FRACTION of the smaller radius; None if none does. Keys as the model holds
+        them: `angles[k]` (the second berry's first angle), `berries[j].hinge_x`, `obstacles[k].point`."""
+        from ..physics.kinematics import penetrations  # physics reads the model: imported when a scene is built
+
+        m = self.model
+        if not m.pairs:
+            return None
+        M, nb = m.arrays, m.n_berries
+        i, j = M.pair["i"], M.pair["j"]
+        radius = M.berry["radius"]
+        bound = MAX_OVERLAP_FRACTION * np.where(j < nb, np.minimum(radius[i], radius[np.minimum(j, nb - 1)]),
+                                                radius[i])
+        states = [("initial", self.initial_state)]
+        if m.planar:
+            states.append(("hanging rest", np.zeros(2 * m.n_dof)))
+        delta = np.empty(len(m.pairs))
+        for label, y in states:
+            penetrations(y, M, delta)
+            deep = np.flatnonzero(delta > bound)
+            if deep.size == 0:
+                continue
+            p = int(deep[0])
+            a, b, most = m.berries[i[p]], int(j[p]), bound[p] * 1e3
+            if b >= nb:
+                k = b - nb
+                return (f"obstacles[{k}].point", f"berry {a.name!r} starts {delta[p] * 1e3:.3g} mm inside obstacle "
+                        f"{m.obstacles[k].name!r} in the {label} state; at most {most:.3g} mm "
+                        f"({MAX_OVERLAP_FRACTION:g} of its radius) is allowed")
+            key = f"berries[{b}].hinge_x" if label == "hanging rest" else f"angles[{m.dof[b]}]"
+            return (key, f"berries {a.name!r} and {m.berries[b].name!r} overlap by {delta[p] * 1e3:.3g} mm in the "
+                    f"{label} state; at most {most:.3g} mm ({MAX_OVERLAP_FRACTION:g} of the smaller radius) is allowed")
         return None
 
     def refuses_excitation(self) -> tuple[str, str] | None:

@@ -24,7 +24,6 @@ from .budget import check_state
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
 #: The largest initial overlap accepted, as a fraction of the smaller radius: beyond it the
 #: linear contact laws are far outside their calibration and the start is almost surely a typo.
-MAX_OVERLAP_FRACTION = 0.2
 #: scene and sweep files are a few kB (a 300-berry cluster is about 100 kB); a larger file is a wrong path
 MAX_FILE_BYTES = 64 * 2**20
 
@@ -106,7 +105,6 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
         raise SceneError("name", f"expected a string, got {v.show(name)}")
     gravity = v.within("gravity", doc.get("gravity", Model.gravity), bound(Model, "gravity"))
     berries, angles, rates = _berries(doc.get("berries"))
-    names = [b.name for b in berries]
     pairs, pruned = _contact(doc.get("contact"), berries) if "contact" in doc else ([], 0)
     couplings = _coupling(doc["coupling"], berries) if "coupling" in doc else ()
     thresholds = _thresholds(doc.get("thresholds", {}))
@@ -115,11 +113,26 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     solver = _solver(doc.get("solver", {}))
     check_state(len(model.pairs), solver.zeno_max_events)  # values in range that together would not fit
     excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)
-    _check_overlap(model, angles, names)
     if not source:
         from .toml_out import dumps
         source = dumps({"name": name, **{k: v for k, v in doc.items() if k != "name"}})
-    return Scene(model, tuple(angles), tuple(rates), excitation, solver, thresholds, source, name)
+    try:
+        return Scene(model, tuple(angles), tuple(rates), excitation, solver, thresholds, source, name)
+    except SceneError as e:  # the checks a scene meets however it is built, on the keys of this file
+        raise SceneError(_file_key(model, e.key), e.why) from None
+
+
+def _file_key(model: Model, key: str) -> str:
+    """The scene file's key for a key as the model holds it (Scene.refuses_overlap): a berry's first angle, an
+    obstacle's first shape key."""
+    m = re.fullmatch(r"angles\[(\d+)\]", key)
+    if m:
+        j = int(np.searchsorted(model.dof, int(m[1]), side="right")) - 1
+        return f"berries[{j}].angle" + ("[0]" if model.berries[j].spherical else "")
+    m = re.fullmatch(r"obstacles\[(\d+)\]\.point", key)
+    if m:
+        return f"obstacles[{m[1]}].{OBSTACLE_SHAPE_KEYS[model.obstacles[int(m[1])].kind][0]}"
+    return key
 
 
 def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
@@ -487,33 +500,3 @@ def _thresholds(raw: Any) -> Thresholds:
     return Thresholds(**{f: v.within(f"{key}.{f}", raw.get(f, getattr(d, f)), bound(Thresholds, f))
                          for f in ("detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction")})
 
-
-def _check_overlap(model: Model, angles: list[float], names: list[str]) -> None:
-    """Reject starts (or hanging rest states) that overlap far beyond what a contact law can mean."""
-    from ..physics.kinematics import penetrations
-
-    M = model.arrays
-    nd = model.n_dof
-    states = [("initial", np.r_[angles, np.zeros(nd)])]
-    if model.planar:
-        states.append(("hanging rest", np.zeros(2 * nd)))
-    for label, y in states:
-        delta = np.zeros(len(model.pairs))
-        penetrations(y, M, delta)
-        for pr, overlap in zip(model.pairs, delta):
-            if pr.j >= model.n_berries:
-                k = pr.j - model.n_berries
-                bound = MAX_OVERLAP_FRACTION * model.berries[pr.i].radius
-                if overlap > bound:
-                    where = OBSTACLE_SHAPE_KEYS[model.obstacles[k].kind][0]
-                    raise SceneError(f"obstacles[{k}].{where}", f"berry {names[pr.i]!r} starts {overlap * 1e3:.3g} mm "
-                                     f"inside obstacle {model.obstacles[k].name!r} in the {label} state; at most "
-                                     f"{bound * 1e3:.3g} mm ({MAX_OVERLAP_FRACTION:g} of its radius) is allowed")
-                continue
-            bi, bj = model.berries[pr.i], model.berries[pr.j]
-            bound = MAX_OVERLAP_FRACTION * min(bi.radius, bj.radius)
-            if overlap > bound:
-                raise SceneError(
-                    f"berries[{pr.j}].hinge_x" if label == "hanging rest" else f"berries[{pr.j}].angle",
-                    f"berries {names[pr.i]!r} and {names[pr.j]!r} overlap by {overlap * 1e3:.3g} mm in the {label} "
-                    f"state; at most {bound * 1e3:.3g} mm ({MAX_OVERLAP_FRACTION:g} of the smaller radius) is allowed")
