@@ -98,12 +98,14 @@ def check_target(path: str | Path, types: Iterable[str] | None, option: str) -> 
             name_max = 255
         if types is not None and len(os.fsencode(p.name)) + PART_EXTRA > name_max:
             raise GrapefmuError(f"{where}: file name too long; at most {name_max - PART_EXTRA} bytes here")
+        probe = None
         try:  # the one sure test (permissions, ACLs, read-only mounts, and root): make a temporary file there
             fd, probe = tempfile.mkstemp(prefix=_part_prefix(p), suffix=PART_SUFFIX, dir=home)
             os.close(fd)
-            os.unlink(probe)
         except OSError as e:
             raise GrapefmuError(f"{where}: cannot write in directory {home}: {e.strerror or e}") from None
+        finally:  # however it ends: a signal between making and removing it left it behind
+            _remove_own_parts(p, home, probe)
     except OSError as e:
         raise GrapefmuError(f"{where}: {e.strerror or e}") from None
     return p
@@ -117,10 +119,10 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_parts(path)
-    prefix, tmp = _part_prefix(path), None
+    tmp = None
     try:
         try:
-            fd, tmp = tempfile.mkstemp(prefix=prefix, suffix=PART_SUFFIX, dir=path.parent)
+            fd, tmp = tempfile.mkstemp(prefix=_part_prefix(path), suffix=PART_SUFFIX, dir=path.parent)
         except OSError as e:
             raise GrapefmuError(f"{path}: cannot write in directory {path.parent}: {e.strerror or e}") from None
         os.close(fd)
@@ -130,11 +132,16 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     finally:
-        # a signal the moment the file exists (inside mkstemp, before its name is known here) leaves it too: the
-        # temporary files of this process for this target go
-        for part in [Path(tmp)] if tmp is not None else path.parent.glob(f"{glob.escape(prefix)}*{PART_SUFFIX}"):
-            with contextlib.suppress(FileNotFoundError):
-                part.unlink()
+        _remove_own_parts(path, path.parent, tmp)
+
+
+def _remove_own_parts(path: Path, home: Path, tmp: str | None) -> None:
+    """Remove the temporary file tmp of `path` in `home`; without its name (a signal the moment mkstemp made it,
+    before the name got back to the caller), every temporary file of this process for `path` there."""
+    prefix = _part_prefix(path)
+    for part in [Path(tmp)] if tmp is not None else home.glob(f"{glob.escape(prefix)}*{PART_SUFFIX}"):
+        with contextlib.suppress(FileNotFoundError):
+            part.unlink()
 
 
 def write_csv(run: Run, path: str | Path) -> None:
