@@ -126,7 +126,8 @@ def test_pedicel_tension_balances_radial_forces():
     k, c, k3, c3 = 2000.0, 1.4, 2.0, 0.01
     sc = Scene(Model(berries, (ContactPair(0, 1, ContactLaw("kelvin-voigt", k, c)),), (Coupling(0, 1, k3, c3),)),
                (0.12, -0.1), (0.0, 0.0))
-    y = Solver(sc).y
+    from grapefmu.physics.layout import initial, layout_of
+    y = initial(layout_of(sc), sc)  # the berries 7.9 mm into each other: deeper than a run may start
     y[2:4] = [1.2, -0.7]
     ax, ay = 1.5, -2.0
     out = observe_one(sc, y, loaded(1, 0.1), (ax, 0.0, ay, 0.0, 0.0, 0.0))

@@ -123,3 +123,67 @@ def test_zeno_guard_stops_an_accumulation_cleanly():
     ref = simulate(sc, method="reference", rtol=1e-11, atol=1e-13)
     # the guard changes how kinks are integrated, not the physics
     assert np.abs(run.angles - ref.angles).max() < 1e-4
+
+
+def _stable_reach(T) -> float:
+    """How far along the negative real axis the Runge–Kutta pair T is stable: the largest x with |R(−x)| ≤ 1,
+    R(z) = 1 + z bᵀ (I − zA)⁻¹ 1 from the tableau alone."""
+    A, b, one = np.asarray(T.a), np.asarray(T.b), np.ones(len(T.b))
+
+    def R(x):
+        return 1.0 - x * b @ np.linalg.solve(np.eye(len(b)) + x * A, one)
+    xs = np.linspace(0.01, 10.0, 4000)
+    stable = np.array([abs(R(x)) <= 1.0 for x in xs])
+    return float(xs[np.argmin(stable)])  # the first x where it is not
+
+
+@pytest.mark.parametrize("rtol", [1e-4, 1e-6])
+def test_a_stiff_hinge_damping_ends_at_the_step_limit_saying_why(rtol):
+    """A hinge damping c far beyond the twig's inertia m l² decays in 1/λ = m l²/c = 40 ns: an explicit pair can
+    only step it at its stability limit (hλ at the edge of its real stability interval), millions of steps per
+    simulated second. The run stops at the step limit with a SolverError that gives that step size and names
+    max_steps, and the state is as it was."""
+    import re
+
+    from grapefmu.errors import SolverError
+    from grapefmu.solver.solver import Solver
+    from grapefmu.solver.tableau import DOP853, DOPRI5
+
+    m, l, c = 0.01, 0.02, 100.0
+    sc = scene({"berries": [{"name": "b", "mass": m, "radius": 0.005, "twig_length": l, "hinge_x": 0.0,
+                             "hinge_damping": c, "angle": 0.5}], "solver": {"t_end": 1.0}})
+    s = Solver(sc, rtol=rtol, max_steps=20_000)
+    with pytest.raises(SolverError, match="max_steps") as e:
+        s.run()
+    h = float(re.search(r"the step size was ([0-9.e+-]+) s", str(e.value))[1])
+    reach = _stable_reach({"DOPRI5": DOPRI5, "DOP853": DOP853}[s.integrator])
+    assert 0.9 * reach < h * c / (m * l * l) < 1.1 * reach
+    assert s.t == 0.0 and s.y[0] == 0.5
+
+
+@pytest.mark.parametrize("tilt_rate", [1e-3, 1e-9])
+def test_a_swing_over_the_spherical_charts_pole(tilt_rate):
+    """A spherical berry with no forces swinging at ṡ = 10 rad/s with a little tilt momentum p_t = m l² cos² s ṫ:
+    energy and p_t hold, so it turns back where cos² s = p_t² / (2 m l² E), cos s_min = ṫ₀/ṡ₀ (docs/model.md §1).
+    With ṫ₀ = 1e-3 rad/s it turns at cos s = 1e-4 and the run goes on, never nearer the pole than that; with 1e-9
+    it would turn at 1e-10, and the chart cannot follow it: the run stops where s reaches 90° (t = π/20 s) with an
+    error naming the berry, not at the step limit."""
+    from grapefmu.errors import SolverError
+    from grapefmu.solver.solver import Solver
+
+    w0 = 10.0
+    sc = scene({"gravity": 0.0, "berries": [{"name": "b", "mass": 0.01, "radius": 0.005, "twig_length": 0.03,
+                                             "hinge_x": 0.0, "kind": "spherical", "angle": [0.0, 0.0],
+                                             "angular_velocity": [w0, tilt_rate]}], "solver": {"t_end": 0.5}})
+    s = Solver(sc)
+    if tilt_rate > 1e-6:
+        run = s.run()
+        assert run.t[-1] == pytest.approx(0.5)
+        assert np.abs(np.cos(run.angles[:, 0])).min() > 0.999 * tilt_rate / w0
+        return
+    import re
+    with pytest.raises(SolverError, match="spherical berry 'b' swung to 90.0000°, where its swing–tilt chart") as e:
+        s.run()
+    assert float(re.match(r"integration stopped at t = ([0-9.]+) s", str(e.value))[1]) == pytest.approx(
+        math.pi / 2 / w0, abs=1e-6)
+    assert s.t == 0.0

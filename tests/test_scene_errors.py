@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import pytest
 
-from grapefmu import SceneError
+from grapefmu import SceneError, Solver, simulate
 from grapefmu.model.model import ContactPair, Coupling, Obstacle
 from grapefmu.scenefile import parse_scene
 
@@ -130,17 +130,6 @@ SPHERICAL = {"kind": "spherical", "angle": [0.0, 0.0]}
                                                              sc.model.berries[1])),
                         angles=(1.5, 0.0, sc.angles[1]), angular_velocities=(0.0,) * 3),
      "berries[0].angle[0]", "angles[0]", "±80°"),
-    (lambda d: (d["berries"][0].update(angle=0.0), d["berries"][1].update(angle=-0.5)),
-     lambda sc: replace(sc, angles=(0.0, -0.5)), "berries[1].angle", "angles[1]", "overlap by"),
-    (lambda d: (d["berries"][0].update(angle=0.0), d["berries"][1].update(SPHERICAL, angle=[-0.5, 0.0])),
-     lambda sc: replace(sc, model=replace(sc.model, berries=(sc.model.berries[0],
-                                                             replace(sc.model.berries[1], spherical=True))),
-                        angles=(0.0, -0.5, 0.0), angular_velocities=(0.0,) * 3),
-     "berries[1].angle[0]", "angles[1]", "overlap by"),
-    (lambda d: d["berries"][1].update(hinge_x=0.0), _berry(1, hinge_x=0.0), "berries[1].hinge_x", "berries[1].hinge_x",
-     "in the hanging rest state"),
-    (lambda d: d.update(obstacles=[{"name": "plate", "kind": "box", "centre": [0.0, 0.0, -0.045], "size": [0.2, 0.2, 0.02]}]),
-     _plate(point=(0.0, 0.0, -0.045)), "obstacles[0].centre", "obstacles[0].point", "inside obstacle 'plate'"),
 ])
 def test_a_scene_built_in_code_meets_the_scene_files_ranges(file_change, code_change, file_key, code_key, words):
     """The ranges are declared once (model/bounds.py): a scene changed in code with `dataclasses.replace` skipped the
@@ -156,10 +145,34 @@ def test_a_scene_built_in_code_meets_the_scene_files_ranges(file_change, code_ch
     assert words in str(by_file.value) and words in str(by_code.value)
 
 
-def test_the_overlap_a_start_may_hold_is_a_fifth_of_the_smaller_radius_however_the_scene_is_built():
+@pytest.mark.parametrize("file_change, code_change, file_key, code_key, words", [
+    (lambda d: (d["berries"][0].update(angle=0.0), d["berries"][1].update(angle=-0.5)),
+     lambda sc: replace(sc, angles=(0.0, -0.5)), "berries[1].angle", "angles[1]", "overlap by"),
+    (lambda d: (d["berries"][0].update(angle=0.0), d["berries"][1].update(SPHERICAL, angle=[-0.5, 0.0])),
+     lambda sc: replace(sc, model=replace(sc.model, berries=(sc.model.berries[0],
+                                                             replace(sc.model.berries[1], spherical=True))),
+                        angles=(0.0, -0.5, 0.0), angular_velocities=(0.0,) * 3),
+     "berries[1].angle", "angles[1]", "overlap by"),
+    (lambda d: d.update(obstacles=[{"name": "plate", "kind": "box", "centre": [0.0, 0.0, -0.035], "size": [0.2, 0.2, 0.02]}]),
+     _plate(point=(0.0, 0.0, -0.035)), "obstacles[0].centre", "obstacles[0].point", "in the initial state"),
+])
+def test_a_start_overlapping_too_deep_is_refused_however_the_scene_was_built(file_change, code_change, file_key,
+                                                                             code_key, words):
     """A scene built in code used to skip the file's overlap check: the right berry started 6 mm into the left one
-    and was flung to 137°. The bound against the geometry worked out here (centre = hinge + L (sin q, 0, −cos q)):
-    0.19 of the radius is taken, 0.21 refused, naming the angle and the allowed overlap."""
+    and was flung to 137°. The file refuses such a start on its keys, a run (Solver, simulate) on the model's."""
+    doc = dual()
+    file_change(doc)
+    with pytest.raises(SceneError) as by_file:
+        scene(doc)
+    with pytest.raises(SceneError) as by_code:
+        Solver(code_change(scene(dual())))
+    assert (by_file.value.key, by_code.value.key) == (file_key, code_key)
+    assert words in by_file.value.why and words in by_code.value.why
+
+
+def test_the_overlap_a_start_may_hold_is_a_fifth_of_the_smaller_radius_however_the_scene_is_built():
+    """The bound against the geometry worked out here (centre = hinge + L (sin q, 0, −cos q)): a start 0.19 of the
+    radius deep runs, 0.21 is refused by simulate, naming the angle and the allowed overlap."""
     from scipy.optimize import brentq
 
     sc = scene(dual())
@@ -173,10 +186,10 @@ def test_the_overlap_a_start_may_hold_is_a_fifth_of_the_smaller_radius_however_t
     for fraction, refused in ((0.19, False), (0.21, True)):
         q = brentq(lambda q: overlap(q) - fraction * right.radius, -1.0, 0.0)
         if not refused:
-            assert replace(sc, angles=(0.0, q)).angles == (0.0, q)
+            assert simulate(replace(sc, angles=(0.0, q)), 0.01).t[-1] == pytest.approx(0.01)
             continue
         with pytest.raises(SceneError) as e:
-            replace(sc, angles=(0.0, q))
+            simulate(replace(sc, angles=(0.0, q)), 0.01)
         assert e.value.key == "angles[1]"
         assert f"overlap by {fraction * right.radius * 1e3:.3g} mm" in e.value.why
         assert f"at most {0.2 * right.radius * 1e3:.3g} mm" in e.value.why

@@ -122,9 +122,10 @@ class Shooting:
             dt /= 4.0  # samples between frames, then cubic Hermite (angles and rates) to each frame's time
         try:
             sc = dataclasses.replace(scene, angles=tuple(x[:self.D]), angular_velocities=tuple(x[self.D:]))
-        except SceneError as e:  # a trial start state outside the model's ranges: a failed trial, as the solver's are
-            raise SolverError(f"a trial start state is refused: {e}") from None
-        run = Solver(sc, rtol=self.rtol, atol=self.atol, t_start=float(t[0])).run(float(t[-1]) + 0.5 * dt, dt)
+            solver = Solver(sc, rtol=self.rtol, atol=self.atol, t_start=float(t[0]))
+        except SceneError as e:  # a trial start state outside the model's ranges (or overlapping far): a failed trial,
+            raise SolverError(f"a trial start state is refused: {e}") from None  # as the solver's are
+        run = solver.run(float(t[-1]) + 0.5 * dt, dt)
         q, w = run.angles, run.angular_velocities
         if on_grid:
             idx = np.round(k).astype(int)

@@ -73,8 +73,8 @@ MAX_SWING = math.radians(80.0)
 #: a berry's initial angle (each of a spherical berry's two) and angular velocity
 ANGLE = Bound(-math.pi, math.pi, unit="rad")
 ANGULAR_VELOCITY = Bound(-1e3, 1e3, unit="rad/s")
-#: the deepest overlap a start (or a planar scene's hanging rest) may hold, as a fraction of the smaller radius: a
-#: contact law means nothing far beyond it, and such a start flings the berries apart with energy nobody gave them
+#: the deepest overlap a start (and a planar scene file's hanging rest) may hold, as a fraction of the smaller radius:
+#: a contact law means nothing far beyond it, and such a start flings the berries apart with energy nobody gave them
 MAX_OVERLAP_FRACTION = 0.2
 
 
@@ -223,6 +223,18 @@ class Model:
     def dof_names(self) -> list[str]:
         """One name per angle: the berry's name, or name_swing and name_tilt for a spherical berry."""
         return [n for b in self.berries for n in ((f"{b.name}_swing", f"{b.name}_tilt") if b.spherical else (b.name,))]
+
+    def overlap_words(self, p: int, delta: float, bound: float, state: str) -> str:
+        """What is wrong with pair p overlapping by delta (m) beyond bound (physics.kinematics.deepest_overlap) in the
+        named state."""
+        pr = self.pairs[p]
+        a, nb = self.berries[pr.i], len(self.berries)
+        if pr.j >= nb:
+            return (f"berry {a.name!r} starts {delta * 1e3:.3g} mm inside obstacle {self.obstacles[pr.j - nb].name!r} "
+                    f"in the {state} state; at most {bound * 1e3:.3g} mm ({MAX_OVERLAP_FRACTION:g} of its radius) "
+                    "is allowed")
+        return (f"berries {a.name!r} and {self.berries[pr.j].name!r} overlap by {delta * 1e3:.3g} mm in the {state} "
+                f"state; at most {bound * 1e3:.3g} mm ({MAX_OVERLAP_FRACTION:g} of the smaller radius) is allowed")
 
     @property
     def planar(self) -> bool:
@@ -461,7 +473,7 @@ class Scene:
 
     def __post_init__(self):
         why = (self.model.refusal or self.refuses_state() or self.solver.refusal() or refusal(self.thresholds, "thresholds")
-               or self.refuses_excitation() or self.model.refuses_turn(self.excitation) or self.refuses_overlap())
+               or self.refuses_excitation() or self.model.refuses_turn(self.excitation))
         if why:
             raise SceneError(*why)
         if self.source and not self.source_key:
@@ -496,41 +508,6 @@ class Scene:
             why = b.refuses_swing(f"angles[{first}]", "swing", self.angles[first])
             if why:
                 return why
-        return None
-
-    def refuses_overlap(self) -> tuple[str, str] | None:
-        """(key, why) for a start, or a planar scene's hanging rest, in which two berries, or a berry and an obstacle,
-        overlap by more than MAX_OVERLAP_FRACTION of the smaller radius; None if none does. Keys as the model holds
-        them: `angles[k]` (the second berry's first angle), `berries[j].hinge_x`, `obstacles[k].point`."""
-        from ..physics.kinematics import penetrations  # physics reads the model: imported when a scene is built
-
-        m = self.model
-        if not m.pairs:
-            return None
-        M, nb = m.arrays, m.n_berries
-        i, j = M.pair["i"], M.pair["j"]
-        radius = M.berry["radius"]
-        bound = MAX_OVERLAP_FRACTION * np.where(j < nb, np.minimum(radius[i], radius[np.minimum(j, nb - 1)]),
-                                                radius[i])
-        states = [("initial", self.initial_state)]
-        if m.planar:
-            states.append(("hanging rest", np.zeros(2 * m.n_dof)))
-        delta = np.empty(len(m.pairs))
-        for label, y in states:
-            penetrations(y, M, delta)
-            deep = np.flatnonzero(delta > bound)
-            if deep.size == 0:
-                continue
-            p = int(deep[0])
-            a, b, most = m.berries[i[p]], int(j[p]), bound[p] * 1e3
-            if b >= nb:
-                k = b - nb
-                return (f"obstacles[{k}].point", f"berry {a.name!r} starts {delta[p] * 1e3:.3g} mm inside obstacle "
-                        f"{m.obstacles[k].name!r} in the {label} state; at most {most:.3g} mm "
-                        f"({MAX_OVERLAP_FRACTION:g} of its radius) is allowed")
-            key = f"berries[{b}].hinge_x" if label == "hanging rest" else f"angles[{m.dof[b]}]"
-            return (key, f"berries {a.name!r} and {m.berries[b].name!r} overlap by {delta[p] * 1e3:.3g} mm in the "
-                    f"{label} state; at most {most:.3g} mm ({MAX_OVERLAP_FRACTION:g} of the smaller radius) is allowed")
         return None
 
     def refuses_excitation(self) -> tuple[str, str] | None:

@@ -308,6 +308,20 @@ def penetrations(y, M, out):
     _penetrations(_padded(y, M), M, out)
 
 
+def deepest_overlap(y, M, fraction: float) -> tuple[int, float, float] | None:
+    """(pair, δ, bound) of the pair at y whose overlap passes `fraction` of its smaller radius (a berry's own against
+    an obstacle) by the most, or None."""
+    i, j, nb = M.pair["i"], M.pair["j"], M.berry.shape[0]
+    if i.size == 0:
+        return None
+    r = M.berry["radius"]
+    bound = fraction * np.where(j < nb, np.minimum(r[i], r[np.minimum(j, nb - 1)]), r[i])
+    delta = np.empty(i.size)
+    penetrations(y, M, delta)
+    p = int(np.argmax(delta - bound))
+    return (p, float(delta[p]), float(bound[p])) if delta[p] > bound[p] else None
+
+
 @jit
 def _positions(y, M, out):
     kin = np.zeros(M.berry.shape[0], dtype=KINEMATICS)

@@ -17,13 +17,12 @@ from . import validate as v
 from ..model.bounds import Bound, bound
 from ..model.contact import (EFFECTIVE_MODULUS, LAW_BOUNDS, LAWS, RESTITUTION, ContactLaw, Law, hertz_stiffness,
                              hunt_crossley_chi, kelvin_voigt_damping, refuses_tension)
-from ..model.model import (ANGLE, ANGULAR_VELOCITY, CONTACT_LOCATIONS, INTEGRATORS, METHODS, OBSTACLE_KINDS, Berry,
-                           ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings, Thresholds)
+from ..model.model import (ANGLE, ANGULAR_VELOCITY, CONTACT_LOCATIONS, INTEGRATORS, MAX_OVERLAP_FRACTION, METHODS,
+                           OBSTACLE_KINDS, Berry, ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings,
+                           Thresholds)
 from .budget import check_state
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
-#: The largest initial overlap accepted, as a fraction of the smaller radius: beyond it the
-#: linear contact laws are far outside their calibration and the start is almost surely a typo.
 #: scene and sweep files are a few kB (a 300-berry cluster is about 100 kB); a larger file is a wrong path
 MAX_FILE_BYTES = 64 * 2**20
 
@@ -113,26 +112,11 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     solver = _solver(doc.get("solver", {}))
     check_state(len(model.pairs), solver.zeno_max_events)  # values in range that together would not fit
     excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)
+    _check_overlap(model, angles)
     if not source:
         from .toml_out import dumps
         source = dumps({"name": name, **{k: v for k, v in doc.items() if k != "name"}})
-    try:
-        return Scene(model, tuple(angles), tuple(rates), excitation, solver, thresholds, source, name)
-    except SceneError as e:  # the checks a scene meets however it is built, on the keys of this file
-        raise SceneError(_file_key(model, e.key), e.why) from None
-
-
-def _file_key(model: Model, key: str) -> str:
-    """The scene file's key for a key as the model holds it (Scene.refuses_overlap): a berry's first angle, an
-    obstacle's first shape key."""
-    m = re.fullmatch(r"angles\[(\d+)\]", key)
-    if m:
-        j = int(np.searchsorted(model.dof, int(m[1]), side="right")) - 1
-        return f"berries[{j}].angle" + ("[0]" if model.berries[j].spherical else "")
-    m = re.fullmatch(r"obstacles\[(\d+)\]\.point", key)
-    if m:
-        return f"obstacles[{m[1]}].{OBSTACLE_SHAPE_KEYS[model.obstacles[int(m[1])].kind][0]}"
-    return key
+    return Scene(model, tuple(angles), tuple(rates), excitation, solver, thresholds, source, name)
 
 
 def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
@@ -500,3 +484,24 @@ def _thresholds(raw: Any) -> Thresholds:
     return Thresholds(**{f: v.within(f"{key}.{f}", raw.get(f, getattr(d, f)), bound(Thresholds, f))
                          for f in ("detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction")})
 
+
+def _check_overlap(model: Model, angles: list[float]) -> None:
+    """Reject starts, and hanging rest states, that overlap far beyond what a contact law can mean (a hinge_x or an
+    angle mistyped); a start is checked again, on the model's keys, wherever a scene is run (Solver)."""
+    from ..physics.kinematics import deepest_overlap
+
+    nd = model.n_dof
+    states = [("initial", np.r_[angles, np.zeros(nd)])]
+    if model.planar:
+        states.append(("hanging rest", np.zeros(2 * nd)))
+    for label, y in states:
+        hit = deepest_overlap(y, model.arrays, MAX_OVERLAP_FRACTION)
+        if hit is None:
+            continue
+        pr, nb = model.pairs[hit[0]], model.n_berries
+        if pr.j >= nb:
+            k = pr.j - nb
+            key = f"obstacles[{k}].{OBSTACLE_SHAPE_KEYS[model.obstacles[k].kind][0]}"
+        else:
+            key = f"berries[{pr.j}].hinge_x" if label == "hanging rest" else f"berries[{pr.j}].angle"
+        raise SceneError(key, model.overlap_words(*hit, label))

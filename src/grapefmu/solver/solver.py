@@ -15,12 +15,13 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import SolverError
+from ..errors import SceneError, SolverError
 from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
-from ..model.model import Scene, off_axis
+from ..model.model import MAX_OVERLAP_FRACTION, Scene, off_axis
 from ..physics import observe as obs
 from ..physics.compiled import entry
 from ..physics.excitation import ACCEL_COMPONENTS, base_accel
+from ..physics.kinematics import deepest_overlap
 from ..physics.layout import LEDGER_TERMS, angular_velocity, displacement, initial, ledger, layout_of, orientation
 from ..results import catalogue
 from ..results.contacts import ContactLog
@@ -45,6 +46,11 @@ DOP853_BELOW = 1e-7
 DOP853_BELOW_FEW = 1e-5
 FEW_BERRIES = 10
 DOP853_TOLERANCE = 1 / 3
+
+#: |cos s| below which a failed run blames a spherical berry's swing for its shrinking steps: the swing–tilt chart
+#: is singular at cos s = 0, and one approaching it stalls the run (|cos s| = 1.2e-3 at steps of 0.6 µs and 1.5e-5
+#: at 80 ps, in a pass that never ended)
+POLE = 1e-2
 
 NO_IMPACTS = Impacts.from_records(np.zeros(0, dtype=st.IMPACT))
 
@@ -102,7 +108,21 @@ class Solver:
                                   float(t_start), np.uint64(self._fingerprint()), s.zeno_max_events)
         # the state's arrays are views on _memory, so that a step's backup and rollback are one copy each
         self.state, self._memory, self._backup = ses.views(self._session)
+        if self.state.physical.contacts["mode"].any():
+            self._refuse_deep_start()
         self._snapshot: catalogue.Snapshot | None = None  # made by the first snapshot()
+
+    def _refuse_deep_start(self) -> None:
+        """A start in contact may overlap by at most MAX_OVERLAP_FRACTION of the smaller radius, however the scene was
+        built: deeper, a contact law means nothing and the pair is flung apart with energy nobody gave it (a scene
+        file says so on its own keys, scenefile.parse)."""
+        hit = deepest_overlap(self.state.physical.y, self.M, MAX_OVERLAP_FRACTION)
+        if hit is None:
+            return
+        m = self.model
+        pr, nb = m.pairs[hit[0]], m.n_berries
+        key = f"obstacles[{pr.j - nb}].point" if pr.j >= nb else f"angles[{m.dof[pr.j]}]"
+        raise SceneError(key, m.overlap_words(*hit, "initial"))
 
     @functools.cached_property
     def _outputs(self) -> tuple[st.Recorder, tuple]:
@@ -311,11 +331,31 @@ class Solver:
         self._backup[:] = self._memory
 
     def _fail(self, status: int) -> None:
-        """Restore the state saved before the call that failed and say why."""
-        t = self.t
+        """Restore the state saved before the call that failed and say why; at the step limit, with the step size
+        that needed so many steps (a stiff scene takes minutes to reach it: say what made it slow)."""
+        t, h = self.t, float(self.state.integrator.clock["h"][0])
+        pole = self._near_pole()
         self._memory[:] = self._backup
-        raise SolverError(f"integration stopped at t = {t:.9g} s: {STATUS_TEXT.get(status, f'status {status}')}; "
-                          f"the state is left at t = {self.t:.9g} s")
+        why = STATUS_TEXT.get(status, f"status {status}")
+        if pole and status in (MAX_STEPS, STEP_UNDERFLOW):
+            why = (f"spherical berry {pole[0]!r} swung to {math.degrees(pole[1]):.4f}°, where its swing–tilt chart is "
+                   "singular (a twig swung sideways flat, docs/model.md §1): the tilt turns ever faster near it and "
+                   f"the steps shrank to {h:.3g} s; this model does not pass that pose")
+        elif status == MAX_STEPS:
+            why += (f" ({self.max_steps} steps; the step size was {h:.3g} s, {1 / h if h > 0 else math.inf:.3g} steps "
+                    "per simulated second: a time scale that short, such as a hinge damping or a contact law far "
+                    "stiffer than the berry's inertia, is stiff for an explicit solver; change it, or allow more "
+                    "steps with max_steps)")
+        raise SolverError(f"integration stopped at t = {t:.9g} s: {why}; the state is left at t = {self.t:.9g} s")
+
+    def _near_pole(self) -> tuple[str, float] | None:
+        """(name, swing) of the spherical berry nearest its chart's singular pose, if one is within POLE of it."""
+        q, best = self.state.physical.y, None
+        for b, k in zip(self.model.berries, self.model.dof):
+            c = abs(math.cos(q[k]))
+            if b.spherical and c < POLE and (best is None or c < best[0]):
+                best = (c, b.name, float(q[k]))
+        return best and best[1:]
 
     def run(self, t_end: float | None = None, output_interval: float | None = None,
             progress: Callable[[float, float], None] | None = None) -> Run:
