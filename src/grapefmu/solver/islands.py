@@ -32,7 +32,7 @@ from . import state as st
 from .loop import IMPACTS_FULL, OUT_FULL, grid_last
 from .drift import components, joined, regrouped, slack
 from .handover import flush_all, form_all, parts, retire_all
-from .solver import STATUS_TEXT, Solver, open_impacts, run_stats
+from .solver import Solver, near_pole, open_impacts, run_stats, stopped
 
 #: the default window, s: long enough that a window's calls cost little against its steps, short enough that
 #: berries stay near their extrapolated paths (`grapefmu bench --scale` measures other lengths)
@@ -238,9 +238,12 @@ class Islands:
             if status == OUT_FULL:
                 ses.grow(s)
             elif status != IMPACTS_FULL:
-                t = ses.views(s)[0].physical.t[0]
+                S = ses.views(s)[0]
+                t, h = S.physical.t[0], float(S.integrator.clock["h"][0])
+                berries = [self.scene.model.berries[m] for m in batch.segs[k].members]
+                pole = near_pole(S.physical.y, berries, np.cumsum([0] + [b.ndof for b in berries]))
                 ses.rollback(s, batch.saved[k])
-                raise SolverError(f"integration stopped at t = {t:.9g} s: {STATUS_TEXT.get(status, f'status {status}')}")
+                raise SolverError(f"integration stopped at t = {t:.9g} s: {stopped(status, h, self.max_steps, pole)}")
 
     def _slack(self, span: float) -> np.ndarray:
         """For each berry-berry pair, a lower bound on its gap over the window (drift.slack)."""

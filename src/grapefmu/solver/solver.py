@@ -61,6 +61,34 @@ STATUS_TEXT = {
 }
 
 
+
+def near_pole(y: np.ndarray, berries, dofs) -> tuple[str, float] | None:
+    """(name, swing) of the spherical berry nearest its swing–tilt chart's pole (cos s = 0) if one is within POLE of
+    it; berries[k]'s swing is y[dofs[k]]."""
+    best = None
+    for b, k in zip(berries, dofs):
+        c = abs(math.cos(y[k]))
+        if b.spherical and c < POLE and (best is None or c < best[0]):
+            best = (c, b.name, float(y[k]))
+    return best and best[1:]
+
+
+def stopped(status: int, h: float, max_steps: int, pole: tuple[str, float] | None) -> str:
+    """Why a run stopped, for its SolverError: a spherical berry at its chart's pole (pole: near_pole()) when the steps
+    shrank without end there, the step limit with the step size that needed so many steps (a stiff scene takes
+    minutes to reach it: say what makes it slow), or the status's text."""
+    if pole and status in (MAX_STEPS, STEP_UNDERFLOW):
+        return (f"spherical berry {pole[0]!r} swung to {math.degrees(pole[1]):.4f}°, where its swing–tilt chart is "
+                "singular (a twig swung sideways flat, docs/model.md §1): the tilt turns ever faster near it and the "
+                f"steps shrank to {h:.3g} s; this model does not pass that pose")
+    why = STATUS_TEXT.get(status, f"status {status}")
+    if status == MAX_STEPS:
+        why += (f" ({max_steps} steps; the step size was {h:.3g} s, {1 / h if h > 0 else math.inf:.3g} steps per "
+                "simulated second: a time scale that short, such as a hinge damping or a contact law far stiffer "
+                "than the berry's inertia, is stiff for an explicit solver; change it, or allow more steps with "
+                "max_steps)")
+    return why
+
 class Solver:
     """One simulation in progress. The model is read-only; everything that changes lives in `state`."""
 
@@ -331,31 +359,12 @@ class Solver:
         self._backup[:] = self._memory
 
     def _fail(self, status: int) -> None:
-        """Restore the state saved before the call that failed and say why; at the step limit, with the step size
-        that needed so many steps (a stiff scene takes minutes to reach it: say what made it slow)."""
-        t, h = self.t, float(self.state.integrator.clock["h"][0])
-        pole = self._near_pole()
+        """Restore the state saved before the call that failed and say why (stopped())."""
+        t, S = self.t, self.state
+        why = stopped(status, float(S.integrator.clock["h"][0]), self.max_steps,
+                      near_pole(S.physical.y, self.model.berries, self.model.dof))
         self._memory[:] = self._backup
-        why = STATUS_TEXT.get(status, f"status {status}")
-        if pole and status in (MAX_STEPS, STEP_UNDERFLOW):
-            why = (f"spherical berry {pole[0]!r} swung to {math.degrees(pole[1]):.4f}°, where its swing–tilt chart is "
-                   "singular (a twig swung sideways flat, docs/model.md §1): the tilt turns ever faster near it and "
-                   f"the steps shrank to {h:.3g} s; this model does not pass that pose")
-        elif status == MAX_STEPS:
-            why += (f" ({self.max_steps} steps; the step size was {h:.3g} s, {1 / h if h > 0 else math.inf:.3g} steps "
-                    "per simulated second: a time scale that short, such as a hinge damping or a contact law far "
-                    "stiffer than the berry's inertia, is stiff for an explicit solver; change it, or allow more "
-                    "steps with max_steps)")
         raise SolverError(f"integration stopped at t = {t:.9g} s: {why}; the state is left at t = {self.t:.9g} s")
-
-    def _near_pole(self) -> tuple[str, float] | None:
-        """(name, swing) of the spherical berry nearest its chart's singular pose, if one is within POLE of it."""
-        q, best = self.state.physical.y, None
-        for b, k in zip(self.model.berries, self.model.dof):
-            c = abs(math.cos(q[k]))
-            if b.spherical and c < POLE and (best is None or c < best[0]):
-                best = (c, b.name, float(q[k]))
-        return best and best[1:]
 
     def run(self, t_end: float | None = None, output_interval: float | None = None,
             progress: Callable[[float, float], None] | None = None) -> Run:
