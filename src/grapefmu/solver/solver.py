@@ -61,7 +61,6 @@ STATUS_TEXT = {
 }
 
 
-
 def near_pole(y: np.ndarray, berries, dofs) -> tuple[str, float] | None:
     """(name, swing) of the spherical berry nearest its swing–tilt chart's pole (cos s = 0) if one is within POLE of
     it; berries[k]'s swing is y[dofs[k]]."""
@@ -88,6 +87,7 @@ def stopped(status: int, h: float, max_steps: int, pole: tuple[str, float] | Non
                 "than the berry's inertia, is stiff for an explicit solver; change it, or allow more steps with "
                 "max_steps)")
     return why
+
 
 class Solver:
     """One simulation in progress. The model is read-only; everything that changes lives in `state`."""
