@@ -168,6 +168,9 @@ def test_a_swing_over_the_spherical_charts_pole(tilt_rate):
     With ṫ₀ = 1e-3 rad/s it turns at cos s = 1e-4 and the run goes on, never nearer the pole than that; with 1e-9
     it would turn at 1e-10, and the chart cannot follow it: the run stops where s reaches 90° (t = π/20 s) with an
     error naming the berry, not at the step limit."""
+    import re
+    from dataclasses import replace
+
     from grapefmu.errors import SolverError
     from grapefmu.solver.solver import Solver
 
@@ -181,11 +184,6 @@ def test_a_swing_over_the_spherical_charts_pole(tilt_rate):
         assert run.t[-1] == pytest.approx(0.5)
         assert np.abs(np.cos(run.angles[:, 0])).min() > 0.999 * tilt_rate / w0
         return
-    import re
-
-    from dataclasses import replace
-
-    from grapefmu import simulate
     in_islands = replace(sc, solver=replace(sc.solver, islands=True))
     for run in (s.run, lambda: simulate(in_islands)):  # one step size, and in islands
         with pytest.raises(SolverError, match="spherical berry 'b' swung to 90.0000°, where its swing–tilt chart") as e:
