@@ -6,7 +6,6 @@ from __future__ import annotations
 import io
 import json
 import math
-import os
 import sys
 from ctypes import byref
 
@@ -211,7 +210,6 @@ def main(argv):
     out = {"fmi2": fmi2(argv[0], argv[2]), "fmi3": fmi3(argv[1])}
     print("JSON:" + json.dumps(out), flush=True)
     sys.stdout.flush()
-    os._exit(0)  # docs/reliability.md, known limits: pythonfmu3's FMI 3 binary may abort a Python host at exit
 
 
 if __name__ == "__main__":

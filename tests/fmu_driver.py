@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import subprocess
 import sys
 from pathlib import Path
@@ -333,4 +332,3 @@ if __name__ == "__main__":
     main(sys.argv[1:])
     release_all()
     sys.stdout.flush()
-    os._exit(0)

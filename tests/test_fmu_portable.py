@@ -38,8 +38,6 @@ for k in range(%d):
 f.terminate()
 f.freeInstance()
 print("JSON:" + json.dumps({"angles": angles, "seconds": time.perf_counter() - t0}), flush=True)
-import os
-os._exit(0)  # docs/reliability.md, known limits: a Python host that freed a pythonfmu instance may abort at exit
 """
 
 

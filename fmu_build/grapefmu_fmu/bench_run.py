@@ -55,6 +55,4 @@ def main(scene_path: str) -> None:
 
 
 if __name__ == "__main__":
-    import os
     main(sys.argv[1])
-    os._exit(0)  # see docs/fmu.md: skip pythonfmu's teardown at interpreter exit

@@ -10,7 +10,8 @@
    - raises the status of a call to whatever the Python side asked for through grapefmu_refuse
      (the slave never raises, so pythonfmu never sees an exception), and
    - finalizes a Python it started when the process exits (before the libraries' destructors: without
-     it, scipy's libgfortran aborts the host with "free(): corrupted unsorted chunks" at exit).
+     it, scipy's libgfortran aborts the host with "free(): corrupted unsorted chunks" at exit), and
+   - releases pythonfmu's Python state before that binary's own exit code runs (release_inner_state).
    The forwarders for every other FMI function are generated from the FMI headers (shim.py). */
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -71,6 +72,7 @@ static int settle(int status)
 
 static void* inner_library;
 static pthread_mutex_t load_lock = PTHREAD_MUTEX_INITIALIZER;
+static int release_registered; /* release_inner_state is an exit handler (once per load of this layer) */
 
 static void say(const Instance* I, int status, const char* fmt, ...)
 {
@@ -142,6 +144,19 @@ static void stop_python(void)
     fin();
 }
 
+/* pythonfmu's binary keeps its Python state in a global std::shared_ptr. At exit the C++ runtime destroys it
+   (an exit handler registered when the binary was loaded) and then the binary's destructor function,
+   finalizePythonInterpreter, assigns nullptr to it: its count is decremented a second time, in memory already
+   freed. That write corrupted the heap and the host aborted at exit in scipy's libgfortran ("corrupted
+   double-linked list": a Python host of the FMI 3.0 FMU 24 times in 24, of the FMI 2.0 one now and then;
+   docs/reliability.md). Released first, from a handler registered after the binary was loaded and so run before
+   its own, and when this layer is unloaded, the pointer is empty when both come, and neither frees anything. */
+static void release_inner_state(void)
+{
+    void (*release)(void) = inner_library ? (void (*)(void))dlsym(inner_library, "finalizePythonInterpreter") : NULL;
+    if (release) release();
+}
+
 /* libpython in the process, an interpreter running, pythonfmu's binary loaded. NULL or what is missing. */
 static const char* load(const char* resources, char* why, size_t n)
 {
@@ -194,6 +209,9 @@ static const char* load(const char* resources, char* why, size_t n)
         if (!inner_library) {
             snprintf(why, n, "cannot load %s: %s", path, dlerror());
             err = why;
+        } else if (!release_registered) {
+            atexit(release_inner_state);
+            release_registered = 1;
         }
     }
 done:
@@ -204,6 +222,7 @@ done:
 /* The host unloads the FMU: unload pythonfmu's binary with it, so that loading the FMU again starts it afresh. */
 __attribute__((destructor)) static void unload(void)
 {
+    release_inner_state();
     if (inner_library) dlclose(inner_library);
     inner_library = NULL;
 }
