@@ -1,9 +1,12 @@
 """Random valid scenes across the documented ranges (docs/scenes.md), run by `Solver.run` with a step limit of
 MAX_STEPS: every run must end with finite samples, or be refused by the scene (SceneError), or stop with a
 SolverError that says why (the step limit of a stiff scene, a spherical berry at its chart's pole). Anything else
-(an exception of another kind, a NaN in the samples) is printed with its seed and scene, and counted.
+(an exception of another kind, a NaN in the samples) is printed with its seed and scene, and counted. A finished
+run whose energy ledger does not close to its tolerance (results/trust.py: the warning the run itself gives) is
+counted too, with the tightest rtol among them: the conservation law as an independent check of the result.
 docs/reliability.md gives the figures of one run.
-Run: .venv/bin/python benchmarks/valid_scene_fuzz.py [first_seed] [count]   (default 150 300)"""
+Run: .venv/bin/python benchmarks/valid_scene_fuzz.py [first_seed] [count]   (default 150 300)
+     .venv/bin/python benchmarks/valid_scene_fuzz.py --converge SEED   (a warned run again at tighter tolerances)"""
 from __future__ import annotations
 
 import copy
@@ -18,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from grapefmu.errors import SceneError, SolverError
+from grapefmu.results.trust import ledger_assessment, ledger_warning
 from grapefmu.scenefile import scene_from_dict
 from grapefmu.solver.solver import Solver
 
@@ -93,6 +97,7 @@ def kind(e: SolverError) -> str:
 
 def main(first: int = 150, count: int = 300) -> None:
     seen: Counter[str] = Counter()
+    warned: list[float] = []  # the rtol of each finished run whose ledger warned
     wall = time.perf_counter()
     for s in range(first, first + count):
         doc = draw(random.Random(s))
@@ -118,13 +123,31 @@ def main(first: int = 150, count: int = 300) -> None:
             continue
         if all(np.isfinite(np.asarray(a, dtype=float)).all() for a in (run.y, run.accel)):
             seen["finished, finite"] += 1
+            if ledger_warning(run):  # energy not conserved to the accuracy asked for: the run says so
+                seen["  of them, warned that the energy ledger misses"] += 1
+                warned.append(sc.solver.rtol)
+                print(f"seed {s}: the ledger misses by {ledger_assessment(run)[0]:.2g} at rtol {sc.solver.rtol:.2g}")
         else:
             seen["DEFECT: non-finite samples"] += 1
             print(f"seed {s}: non-finite samples: {doc}")
     print(f"seeds {first}..{first + count - 1}, {time.perf_counter() - wall:.0f} s:")
-    for what, n in sorted(seen.items()):
+    for what, n in sorted(seen.items(), key=lambda kv: kv[0].strip()):
         print(f"  {what}: {n}")
+    if warned:
+        print(f"  the tightest rtol among the warned: {min(warned):.2g}")
+
+
+def converge(seed: int) -> None:
+    """Seed's scene again at rtol 1e-6, 1e-8 and 1e-10: whether a ledger that missed closes as the tolerance
+    tightens (the method converging), or does not (a defect)."""
+    sc = scene_from_dict(draw(random.Random(seed)), Path.cwd())
+    for rtol in (sc.solver.rtol, 1e-6, 1e-8, 1e-10):
+        run = Solver(sc, rtol=rtol, atol=rtol * 1e-2).run()
+        print(f"seed {seed}, rtol {rtol:.2g}: the ledger misses by {ledger_assessment(run)[0]:.2g}")
 
 
 if __name__ == "__main__":
-    main(*(int(a) for a in sys.argv[1:3]))
+    if sys.argv[1:2] == ["--converge"]:
+        converge(int(sys.argv[2]))
+    else:
+        main(*(int(a) for a in sys.argv[1:3]))
