@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -9,6 +10,8 @@ import pytest
 
 from grapefmu.cli import main
 from grapefmu.errors import SceneError
+from grapefmu.scenefile import scene_from_dict
+from grapefmu.solver.api import simulate
 from grapefmu.sweep import load_spec, run_sweep
 
 SPEC = """scene = "row.toml"
@@ -104,6 +107,26 @@ def test_a_key_whose_values_mix_kinds_is_written_as_their_json_text(folder):
     assert [(r["solver.islands"], r["contact.stiffness"]) for r in table] == \
         [("false", 1500.0), ("false", 3000.5), ('"auto"', 1500.0), ('"auto"', 3000.5)]
     assert all(r["status"] == "ok" for r in table)
+
+
+def test_each_row_carries_the_warnings_of_its_run(folder):
+    """A row whose results cannot be trusted says so: the same lines its run's summary gives (results/trust.py), and
+    none for a row that can be. Before, the sweep dropped them, and a row with a step too long for the contact looked
+    like any other."""
+    row = folder / "row.toml"
+    row.write_text(row.read_text().replace("[solver]\n", '[solver]\nmethod = "event"\nfixed_step = 0.0\n'))
+    (folder / "steps.toml").write_text('scene = "row.toml"\nmode = "grid"\n\n[[parameters]]\nkey = "solver.method"\n'
+                                       'values = ["paper"]\n\n[[parameters]]\nkey = "solver.fixed_step"\n'
+                                       'values = [1e-5, 2e-3]\n')
+    spec = load_spec(folder / "steps.toml")
+    table = rows(run_sweep(spec, folder / "steps.parquet", workers=0, progress=False))
+    fine, coarse = table
+    assert fine["status"] == coarse["status"] == "ok" and fine["warnings"] == []
+    doc = tomllib.loads((folder / "row.toml").read_text())
+    doc["solver"].update(method="paper", fixed_step=2e-3)
+    alone = simulate(scene_from_dict(doc, folder))  # the same run, outside the sweep
+    assert coarse["warnings"] == alone.summary()["warnings"]
+    assert any(w.startswith("fixed step 0.002 s is too long") for w in coarse["warnings"])
 
 
 @pytest.mark.parametrize("change, field", [

@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import sys
 
-from fmpy import extract, read_model_description
-from fmpy.fmi2 import FMU2Slave
-from fmpy.fmi3 import FMU3Slave
-
 
 def main(path: str, fmi: str) -> None:
+    from fmpy import extract, read_model_description  # a host's packages, not the FMU's (as bench_run)
+    from fmpy.fmi2 import FMU2Slave
+    from fmpy.fmi3 import FMU3Slave
+
     md = read_model_description(path)
     unzipped = extract(path)
     for k in range(5):

@@ -8,11 +8,12 @@ from typing import Any
 from ..errors import GrapefmuError
 
 #: the row's result columns, in order (inputs come first, one column per swept key): `Run.summary()` keys, which
-#: carry their units as suffixes (`peak_contact_force_n`), then the row's own status and times
+#: carry their units as suffixes (`peak_contact_force_n`), with `warnings` (results/trust.py: why a row's results
+#: cannot be trusted, one line each), then the row's own status and times
 SUMMARY_COLUMNS = ("collision_count", "peak_contact_force_n", "peak_pedicel_tension_n", "berries_over_detachment_force",
                    "detachment_risk", "bruising_impacts", "fatigue_impacts", "max_impact_energy_j",
                    "dissipated_energy_j", "max_dissipated_per_berry_j", "max_active_pairs", "steps",
-                   "bruised_berries", "detached_berries")
+                   "bruised_berries", "detached_berries", "warnings")
 #: wall_time_s: the solver alone; compile_time_s: numba's compile or cache load, paid by a worker's first run
 RESULT_COLUMNS = ("status", *SUMMARY_COLUMNS, "wall_time_s", "compile_time_s")
 
