@@ -44,15 +44,21 @@ def dist(plan: Path):
     return distribution(tomllib.loads(plan.read_text()), None, RANGES)
 
 
-def direct_count(plan: Path, row: dict) -> tuple[bool, bool, set[str], set[str]]:
-    """One sample simulated here, from the plan's own document with the row's values written in by hand, and
-    its outcomes counted from the impact book and the pedicel tensions (not from the summary)."""
+def row_doc(plan: Path, row: dict) -> dict:
+    """The plan's own document with a row's values (RANGES) written in by hand."""
     doc = tomllib.loads(plan.read_text())
     for b in doc["berries"]:
         b["hinge_damping"] = row["berries[*].hinge_damping"]
     doc["contact"]["stiffness"] = row["contact.stiffness"]
     doc["thresholds"]["bruise_force"] = row["thresholds.bruise_force"]
     doc["thresholds"]["detachment_force"] = row["thresholds.detachment_force"]
+    return doc
+
+
+def direct_count(plan: Path, row: dict) -> tuple[bool, bool, set[str], set[str]]:
+    """One sample simulated here, from the plan's own document with the row's values written in by hand, and
+    its outcomes counted from the impact book and the pedicel tensions (not from the summary)."""
+    doc = row_doc(plan, row)
     run = grapefmu.simulate(scene_from_dict(doc, plan.parent))
     th, imp, m = doc["thresholds"], run.impacts, run.scene.model
     hit = (imp.peak_force >= th["bruise_force"]) | (imp.dissipated >= th.get("bruise_energy", 1e-3))
@@ -82,6 +88,25 @@ def test_probabilities_agree_with_a_direct_count_of_the_same_runs_for_two_plans(
     assert "| P(bruise), cluster | " + fast.bruise.text() in md and "Clopper–Pearson" in md
     assert (tmp_path / "risk.png").stat().st_size > 10_000
     assert json.loads((tmp_path / "risk.json").read_text())["plans"][0]["bruise"]["count"] == fast.bruise.k
+
+
+def test_runs_that_warn_are_counted_and_reported(plans, tmp_path):
+    """A plan whose runs cannot be trusted (contacts checked only at the ends of fixed 2 ms steps, five times the
+    contact's resolution) still gives its probabilities, and says how many of its runs warned; a plan whose runs
+    give no warning says nothing. The count is that of the same runs' own summaries, simulated here."""
+    coarse = tmp_path / "plan_coarse.toml"
+    coarse.write_text(plans[1].read_text().replace('method = "event"', 'method = "paper"\nfixed_step = 2e-3'))
+    d = dist(plans[1])
+    r = assess([coarse, plans[1]], d, 3, 5, tmp_path, workers=0, progress=False)
+    bad, good = r.outcomes
+    alone = [grapefmu.simulate(scene_from_dict(row_doc(coarse, row), coarse.parent)).summary()["warnings"]
+             for row in bad.rows]
+    assert [row["warnings"] for row in bad.rows] == alone
+    assert bad.warned == 3 and all(any(w.startswith("fixed step 0.002 s") for w in ws) for ws in alone)
+    assert good.warned == sum(bool(row["warnings"]) for row in good.rows) == 0
+    md = (tmp_path / "risk.md").read_text()
+    assert "Runs that warned their results cannot be trusted" in md and "plan_coarse: 3 of 3" in md
+    assert json.loads((tmp_path / "risk.json").read_text())["plans"][0]["warned_runs"] == 3
 
 
 def test_the_interval_covers_the_estimate_of_ten_times_the_samples(plans, tmp_path):

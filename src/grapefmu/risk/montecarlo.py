@@ -78,6 +78,7 @@ class Outcome:
     berry_detach: dict[str, Probability]
     failed: list[str] = field(default_factory=list)  # the status of every run that did not finish
     rows: list[dict[str, Any]] = field(default_factory=list, repr=False)
+    warned: int = 0  # finished runs that warned their results cannot be trusted (the table's `warnings`)
 
     def as_json(self) -> dict[str, Any]:
         def pr(x: Probability) -> dict[str, Any]:
@@ -87,7 +88,7 @@ class Outcome:
                 "bruise": pr(self.bruise), "detach": pr(self.detach),
                 "berries": {b: {"bruise": pr(self.berry_bruise[b]), "detach": pr(self.berry_detach[b])}
                             for b in self.berry_bruise},
-                "failed_runs": len(self.failed)}
+                "failed_runs": len(self.failed), "warned_runs": self.warned}
 
 
 def plan_doc(path: str | Path) -> tuple[dict[str, Any], str]:
@@ -154,7 +155,7 @@ def outcome(plan: str, scale: float, duration: float, table: Path, doc: dict[str
         Probability(sum(bool(r["detachment_risk"]) for r in ok), n),
         {b: Probability(sum(b in s for s in bruised), n) for b in names},
         {b: Probability(sum(b in s for s in detached), n) for b in names},
-        [r["status"] for r in rows if r["status"] != "ok"], rows)
+        [r["status"] for r in rows if r["status"] != "ok"], rows, sum(bool(r.get("warnings")) for r in ok))
 
 
 def check_samples(samples: int, bound: float | None) -> None:

@@ -39,6 +39,11 @@ def markdown(outcomes: list[Outcome], dist: Distribution, samples: int, seed: in
     if failed:
         out += ["", "Runs that did not finish (left out of the counts): "
                 + ", ".join(f"{p}: {n}" for p, n in failed) + "."]
+    warned = [(o.plan, o.warned, o.bruise.n) for o in outcomes if o.warned]
+    if warned:
+        out += ["", "Runs that warned their results cannot be trusted (counted all the same; each says why in the "
+                "table's `warnings` column, docs/sweeps.md): " + ", ".join(f"{p}: {k} of {n}" for p, k, n in warned)
+                + "."]
     if search is not None:
         out += ["", f"## Fastest duration with P(bruise) under {search.bound:g}", "",
                 f"A scale counts only when the upper end of its {pct} interval is at or below the bound.", "",
