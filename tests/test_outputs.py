@@ -1,6 +1,7 @@
 """What a run writes, read back by independent readers (numpy, pyarrow, rosbags, mcap-ros2-support)."""
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import tomllib
@@ -71,6 +72,21 @@ def test_mcap_reads_back_in_rosbags_and_mcap_ros2(run, tmp_path):
         assert len(efforts) == len(run.t) and all(len(e) == 2 for e in efforts)
     counts = decode_everything(path)
     assert counts["joint_states"] == counts["pedicel_tension"] == counts["summary"] == len(run.t)
+
+
+def test_a_recording_says_why_its_results_cannot_be_trusted(run, tmp_path):
+    """The grapefmu metadata record holds the run's warnings as a JSON list: a run whose fixed step is too long for
+    its contact says so in the file itself, where Foxglove and rosbags show it; a sound run's list is empty."""
+    from mcap.reader import make_reader
+
+    coarse = simulate(scene(dual(solver={"t_end": 0.5, "method": "paper", "fixed_step": 2e-3})))
+    for r, name in ((run, "fine.mcap"), (coarse, "coarse.mcap")):
+        write_run(r, tmp_path / name)
+        with open(tmp_path / name, "rb") as fh:
+            meta = {m.name: m.metadata for m in make_reader(fh).iter_metadata()}
+        assert json.loads(meta["grapefmu"]["warnings"]) == r.summary()["warnings"]
+    assert r.summary()["warnings"] and r.summary()["warnings"][0].startswith("fixed step 0.002 s is too long")
+    assert run.summary()["warnings"] == []
 
 
 def test_a_turning_run_draws_its_markers_and_frames_where_its_berries_are(tmp_path):

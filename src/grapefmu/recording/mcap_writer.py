@@ -24,7 +24,9 @@ def run_metadata(run: Run) -> dict[str, str]:
             "namespace": messages.NAMESPACE,
             "solver": json.dumps({"rtol": run.stats.get("rtol", s.rtol), "atol": run.stats.get("atol", s.atol),
                                   "t_end": float(run.t[-1]), "output_interval": s.output_interval,
-                                  "islands_from": ISLANDS_FROM, "integrator": run.stats.get("integrator")})}
+                                  "islands_from": ISLANDS_FROM, "integrator": run.stats.get("integrator")}),
+            # why the results cannot be trusted (results/trust.py), one line each, as a Parquet file's summary holds it
+            "warnings": json.dumps(run.summary()["warnings"])}
 
 
 #: markers and /tf in a simulate recording, Hz (a 3D panel needs far fewer than the state topics' samples)
