@@ -9,6 +9,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..model.model import ISLANDS_FROM
+from ..results import trust
 from ..results.run import Run
 from ..results.writers import atomic_path
 from ..scenefile import scene_toml
@@ -25,8 +26,8 @@ def run_metadata(run: Run) -> dict[str, str]:
             "solver": json.dumps({"rtol": run.stats.get("rtol", s.rtol), "atol": run.stats.get("atol", s.atol),
                                   "t_end": float(run.t[-1]), "output_interval": s.output_interval,
                                   "islands_from": ISLANDS_FROM, "integrator": run.stats.get("integrator")}),
-            # why the results cannot be trusted (results/trust.py), one line each, as a Parquet file's summary holds it
-            "warnings": json.dumps(run.summary()["warnings"])}
+            # why the results cannot be trusted, one line each: the summary's `warnings`, without the rest of it
+            "warnings": json.dumps(trust.warnings(run))}
 
 
 #: markers and /tf in a simulate recording, Hz (a 3D panel needs far fewer than the state topics' samples)
