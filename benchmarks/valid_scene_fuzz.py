@@ -1,6 +1,7 @@
 """Random valid scenes across the documented ranges (docs/scenes.md), run by `Solver.run` with a step limit of
 MAX_STEPS: every run must end with finite samples, or be refused by the scene (SceneError), or stop with a
-SolverError that says why (the step limit of a stiff scene, a spherical berry at its chart's pole). Anything else
+SolverError that says why (a hinge too stiff for the step limit, refused before a step; the step limit of a stiff
+scene; a spherical berry at its chart's pole). Anything else
 (an exception of another kind, a NaN in the samples) is printed with its seed and scene, and counted. A finished
 run whose energy ledger does not close to its tolerance (results/trust.py: the warning the run itself gives) is
 counted too, with the tightest rtol among them: the conservation law as an independent check of the result.
@@ -90,6 +91,8 @@ def kind(e: SolverError) -> str:
     text = str(e)
     if "chart is singular" in text:
         return "stopped: a spherical berry at its chart's pole"
+    if "too stiff" in text:
+        return "refused before a step: a hinge too stiff for the step limit (solver/stiffness.py)"
     if "step limit" in text:
         return "stopped: the step limit (stiff)"
     return "stopped: " + text.split(": ", 1)[1].split(";")[0]

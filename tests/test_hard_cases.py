@@ -141,20 +141,24 @@ def _stable_reach(T) -> float:
 def test_a_stiff_hinge_damping_ends_at_the_step_limit_saying_why(rtol):
     """A hinge damping c far beyond the twig's inertia m l² decays in 1/λ = m l²/c = 40 ns: an explicit pair can
     only step it at its stability limit (hλ at the edge of its real stability interval), millions of steps per
-    simulated second. The run stops at the step limit with a SolverError that gives that step size and names
-    max_steps, and the state is as it was."""
+    simulated second. Over a span whose bound on the steps (solver/stiffness.py: half the eigenvalue, the region's
+    farthest point) stays under max_steps, so that it is not refused before a step (tests/test_stiffness.py), the run
+    stops at the step limit with a SolverError that gives that step size and names max_steps, and the state is as it
+    was."""
     import re
 
     from grapefmu.errors import SolverError
     from grapefmu.solver.solver import Solver
+    from grapefmu.solver.stiffness import least_steps
     from grapefmu.solver.tableau import DOP853, DOPRI5
 
     m, l, c = 0.01, 0.02, 100.0
     sc = scene({"berries": [{"name": "b", "mass": m, "radius": 0.005, "twig_length": l, "hinge_x": 0.0,
                              "hinge_damping": c, "angle": 0.5}], "solver": {"t_end": 1.0}})
     s = Solver(sc, rtol=rtol, max_steps=20_000)
-    with pytest.raises(SolverError, match="max_steps") as e:
-        s.run()
+    span = 0.75 * s.max_steps / least_steps(sc.model, s.tableau, 1.0, s.layout.turning)[0]
+    with pytest.raises(SolverError, match="step limit was reached.*max_steps") as e:
+        s.run(span)
     h = float(re.search(r"the step size was ([0-9.e+-]+) s", str(e.value))[1])
     reach = _stable_reach({"DOPRI5": DOPRI5, "DOP853": DOP853}[s.integrator])
     assert 0.9 * reach < h * c / (m * l * l) < 1.1 * reach

@@ -30,6 +30,7 @@ from ..results.records import WORK, concat
 from ..results.run import Run
 from . import session as ses
 from . import state as st
+from .stiffness import refuse_stiff
 from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW, grid_last
 from .tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5, Tableau
 
@@ -373,6 +374,8 @@ class Solver:
         s = self.scene.solver
         t_end = s.t_end if t_end is None else float(t_end)
         dt_out = s.output_interval if output_interval is None else float(output_interval)
+        if self.fixed_step == 0.0:
+            refuse_stiff(self.model, self.tableau, self.integrator, t_end - self.t, self.layout.turning, self.max_steps)
         self._save()
         t_start = self.t
         rec = ses.recording(self._session, grid_last(t_start, t_end, dt_out, True) + 2, dt_out, t_end)

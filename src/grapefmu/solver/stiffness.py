@@ -1,0 +1,93 @@
+"""How many steps an explicit pair needs at the least for a scene's stiffest hinge, known before the first step
+(docs/reliability.md, "Known limits": stiff scenes).
+
+An explicit Runge–Kutta step h is stable on y' = λy only while hλ lies in the pair's stability region
+{z : |R(z)| ≤ 1}, R(z) = 1 + Σ_k z^k bᵀ A^(k−1) 𝟙. Its largest radius in the left half-plane, r_max, bounds every
+stable step by r_max / |λ|, so a run over T needs at least T |λ| / r_max steps, whatever the tolerance. A berry's
+hinge is such a λ: m l² q̈ = −c q̇ − K q about any pose, with K the hinge stiffness k plus the pull of gravity and
+the rachis (at most m l G). The eigenvalues' sum is −c/(m l²) and their product K/(m l²), so the faster one is at
+least max(c / (2 m l²), √(K / (m l²))) in magnitude (a spherical berry's tilt has the smaller inertia m l² cos² s:
+faster still). A run whose bound passes its step limit cannot end: it is refused at once, naming the berry and its
+hinge, where before it stepped to the limit (10⁷ steps, tens of seconds) and then named no berry."""
+from __future__ import annotations
+
+import math
+from functools import cache
+
+import numpy as np
+
+from ..errors import SolverError
+from ..model.excitation import MAX_ACCEL
+from ..model.model import Model
+from .tableau import Tableau
+
+#: directions in the upper left quarter-plane (R has real coefficients: its region is symmetric about the real axis)
+_ANGLES = np.linspace(math.pi / 2, math.pi, 721)
+
+
+def stability_polynomial(tb: Tableau) -> np.ndarray:
+    """R's coefficients, constant first: 1, bᵀ𝟙, bᵀA𝟙, bᵀA²𝟙, … (A strictly lower triangular: degree ≤ stages)."""
+    coef, v = [1.0], np.ones(tb.b.shape[0])
+    for _ in range(tb.b.shape[0]):
+        coef.append(float(tb.b @ v))
+        v = tb.a @ v
+    return np.array(coef)
+
+
+@cache
+def _radius(coef: tuple[float, ...]) -> float:
+    """Along each direction e^(iφ), |R(r e^(iφ))|² − 1 is a real polynomial in r; its smallest positive root is where
+    the region seen from the origin ends that way. Islands beyond it about R's far zeros (DOP853's at z = −23.2, |R| < 1
+    within about 1e-5 of it) are narrower than any step-size controller's spread, and left out."""
+    far = 0.0
+    for phi in _ANGLES:
+        alpha = np.array(coef) * np.exp(1j * phi * np.arange(len(coef)))
+        sq = np.convolve(alpha, alpha.conj()).real
+        sq[0] -= 1.0
+        roots = np.roots(sq[::-1])
+        real = roots[(np.abs(roots.imag) <= 1e-9 * np.abs(roots)) & (roots.real > 1e-6)].real  # r = 0 is a root
+        far = max(far, real.min(initial=np.inf))
+    return far * 1.001  # between the directions the edge may reach a little farther: a bound may only be too long
+
+
+def stability_radius(tb: Tableau) -> float:
+    """r_max: the largest |z| of the pair's stability region in Re z ≤ 0 (tests/test_stiffness.py gives each)."""
+    return _radius(tuple(stability_polynomial(tb)))
+
+
+def hinge_rates(model: Model, turning: bool) -> np.ndarray:
+    """A lower bound on each berry's fastest hinge eigenvalue |λ| (1/s). The pull G on a berry is at most g plus the
+    largest rachis acceleration a scene may give (MAX_ACCEL); a turning rachis adds fields no such bound holds, so
+    there only the damping's part is taken."""
+    rates = np.empty(model.n_berries)
+    for i, b in enumerate(model.berries):
+        inertia = b.mass * b.twig_length ** 2
+        rate = b.hinge_damping / (2.0 * inertia)
+        if not turning:
+            k_low = b.hinge_stiffness - b.mass * b.twig_length * (model.gravity + MAX_ACCEL)
+            rate = max(rate, math.sqrt(max(k_low, 0.0) / inertia))
+        rates[i] = rate
+    return rates
+
+
+def least_steps(model: Model, tb: Tableau, span: float, turning: bool) -> tuple[float, int]:
+    """(steps, berry): the fewest steps any run of `span` seconds can take, set by the berry whose hinge asks most."""
+    rates = hinge_rates(model, turning)
+    i = int(np.argmax(rates))
+    return span * float(rates[i]) / stability_radius(tb), i
+
+
+def refuse_stiff(model: Model, tb: Tableau, integrator: str, span: float, turning: bool, max_steps: int) -> None:
+    """A SolverError, before any step, if the stiffest hinge alone needs more than max_steps steps over span."""
+    steps, i = least_steps(model, tb, span, turning)
+    if not steps > max_steps:
+        return
+    b = model.berries[i]
+    raise SolverError(
+        f"berries[{i}] ({b.name!r}): its hinge is too stiff for the explicit solver ({integrator}) within max_steps = "
+        f"{max_steps}: hinge_damping = {b.hinge_damping:g} N·m·s/rad and hinge_stiffness = {b.hinge_stiffness:g} "
+        f"N·m/rad on an inertia m l² = {b.mass * b.twig_length ** 2:.3g} kg·m² give a time scale of "
+        f"{1.0 / (steps / span * stability_radius(tb)):.3g} s, so no stable step is longer than "
+        f"{span / steps:.3g} s and the {span:g} s asked need at least {steps:.3g} steps; lower its hinge_damping "
+        "or hinge_stiffness, give the berry more mass or a longer twig, or allow more steps with max_steps "
+        "(docs/reliability.md, 'Known limits'); nothing was run")

@@ -1,0 +1,64 @@
+"""A hinge too stiff for the explicit pairs within the step limit is refused before the first step, naming it
+(solver/stiffness.py, docs/reliability.md "Known limits"); the bound it refuses on holds on runs that are stepped."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import grapefmu
+from grapefmu.bench.scenes import _dual, build
+from grapefmu.errors import SolverError
+from grapefmu.solver.stiffness import least_steps, stability_polynomial, stability_radius
+from grapefmu.solver.tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5
+
+
+@pytest.mark.parametrize("tb", [DOPRI5, DOP853, BOGACKI_SHAMPINE], ids=["DOPRI5", "DOP853", "ode23"])
+def test_the_stability_radius_is_where_a_scan_of_each_ray_leaves_the_region(tb):
+    """Against a plain scan of |R| outward along rays (not the roots the module solves for): the farthest first exit
+    over the left half-plane, and R itself against e^z's series, which an order-p pair matches to z^p."""
+    coef = stability_polynomial(tb)
+    assert np.allclose(coef[: tb.order + 1], [1 / math.factorial(k) for k in range(tb.order + 1)], rtol=1e-12)
+    radii = np.arange(1, 1201) * 0.01
+    far = 0.0
+    for phi in np.linspace(math.pi / 2, math.pi, 181):
+        inside = np.abs(np.polynomial.polynomial.polyval(radii * np.exp(1j * phi), coef)) <= 1.0
+        far = max(far, radii[np.argmin(inside)] if not inside.all() else radii[-1])
+    assert far - 0.01 <= stability_radius(tb) <= far * 1.01
+
+
+def stiff(damping: float, stiffness: float = 1e-3, t_end: float = 2.0):
+    """The paper collision's pair with the right berry's hinge made stiff (m l² = 9.9e-6 kg·m²)."""
+    return build(_dual((0.0, math.pi / 4), right={"hinge_damping": damping, "hinge_stiffness": stiffness},
+                       t_end=t_end))
+
+
+def test_a_hinge_too_stiff_for_the_step_limit_is_refused_before_any_step():
+    sc = stiff(1000.0)  # |λ| ≥ c / (2 m l²) = 5.1e7 /s: at least 1.5e7 steps of DOP853 over 2 s
+    s = grapefmu.Solver(sc, rtol=1e-6)
+    before = s.stats
+    with pytest.raises(SolverError, match=r"berries\[1\] \('right'\).*max_steps = 10000000: hinge_damping = 1000 "):
+        s.run()
+    assert s.t == 0.0 and s.stats == before and s.stats["steps"] == 0
+    with pytest.raises(SolverError, match="too stiff"):
+        grapefmu.simulate(sc)
+    # allowed more steps, or asked a shorter span, it runs (here 20 µs)
+    run = grapefmu.Solver(sc, rtol=1e-6).run(2e-5, 1e-5)
+    assert run.t[-1] == pytest.approx(2e-5)
+
+
+@pytest.mark.parametrize("damping, stiffness, t_end, loose", [(10.0, 1e-3, 0.02, 4.0), (0.0, 1000.0, 0.2, None)],
+                         ids=["damper", "spring"])
+def test_no_run_takes_fewer_steps_than_the_bound(damping, stiffness, t_end, loose):
+    """The bound is a floor on the steps actually taken; on a damper, whose fast eigenvalue is c/(m l²) where the
+    bound takes half of it, and DOP853's real interval 6.1 where r_max is 6.8, within a small factor of them."""
+    sc = stiff(damping, stiffness, t_end)
+    s = grapefmu.Solver(sc, rtol=1e-6)
+    bound, berry = least_steps(sc.model, s.tableau, t_end, s.layout.turning)
+    assert berry == 1 and bound > 200
+    s.run()
+    steps = s.stats["steps"]
+    assert steps >= bound
+    if loose:
+        assert steps <= loose * bound
