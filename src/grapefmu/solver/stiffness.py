@@ -12,8 +12,6 @@ hinge, where before it stepped to the limit (10⁷ steps, tens of seconds) and t
 from __future__ import annotations
 
 import math
-from functools import cache
-
 import numpy as np
 
 from ..errors import SolverError
@@ -34,14 +32,13 @@ def stability_polynomial(tb: Tableau) -> np.ndarray:
     return np.array(coef)
 
 
-@cache
-def _radius(coef: tuple[float, ...]) -> float:
+def _radius(coef: np.ndarray) -> float:
     """Along each direction e^(iφ), |R(r e^(iφ))|² − 1 is a real polynomial in r; its smallest positive root is where
     the region seen from the origin ends that way. Islands beyond it about R's far zeros (DOP853's at z = −23.2, |R| < 1
     within about 1e-5 of it) are narrower than any step-size controller's spread, and left out."""
     far = 0.0
     for phi in _ANGLES:
-        alpha = np.array(coef) * np.exp(1j * phi * np.arange(len(coef)))
+        alpha = coef * np.exp(1j * phi * np.arange(len(coef)))
         sq = np.convolve(alpha, alpha.conj()).real
         sq[0] -= 1.0
         roots = np.roots(sq[::-1])
@@ -50,31 +47,39 @@ def _radius(coef: tuple[float, ...]) -> float:
     return far * 1.001  # between the directions the edge may reach a little farther: a bound may only be too long
 
 
+#: r_max of each tableau asked for, by identity (35 ms to find; a run asks every time)
+_RADII: dict[int, tuple[Tableau, float]] = {}
+
+
 def stability_radius(tb: Tableau) -> float:
     """r_max: the largest |z| of the pair's stability region in Re z ≤ 0 (tests/test_stiffness.py gives each)."""
-    return _radius(tuple(stability_polynomial(tb)))
+    known = _RADII.get(id(tb))
+    if known is None or known[0] is not tb:
+        known = _RADII[id(tb)] = (tb, _radius(stability_polynomial(tb)))
+    return known[1]
 
 
-def hinge_rates(model: Model, turning: bool) -> np.ndarray:
-    """A lower bound on each berry's fastest hinge eigenvalue |λ| (1/s). The pull G on a berry is at most g plus the
-    largest rachis acceleration a scene may give (MAX_ACCEL); a turning rachis adds fields no such bound holds, so
-    there only the damping's part is taken."""
-    rates = np.empty(model.n_berries)
-    for i, b in enumerate(model.berries):
-        inertia = b.mass * b.twig_length ** 2
-        rate = b.hinge_damping / (2.0 * inertia)
-        if not turning:
-            k_low = b.hinge_stiffness - b.mass * b.twig_length * (model.gravity + MAX_ACCEL)
-            rate = max(rate, math.sqrt(max(k_low, 0.0) / inertia))
-        rates[i] = rate
-    return rates
+def hinge_rate(b, gravity: float, turning: bool) -> float:
+    """A lower bound on berry b's fastest hinge eigenvalue |λ| (1/s). The pull on it is at most g plus the largest
+    rachis acceleration a scene may give (MAX_ACCEL); a turning rachis adds fields no such bound holds, so there only
+    the damping's part is taken."""
+    inertia = b.mass * b.twig_length * b.twig_length
+    rate = b.hinge_damping / (2.0 * inertia)
+    if not turning:
+        k_low = b.hinge_stiffness - b.mass * b.twig_length * (gravity + MAX_ACCEL)
+        if k_low > 0.0:
+            rate = max(rate, math.sqrt(k_low / inertia))
+    return rate
 
 
 def least_steps(model: Model, tb: Tableau, span: float, turning: bool) -> tuple[float, int]:
     """(steps, berry): the fewest steps any run of `span` seconds can take, set by the berry whose hinge asks most."""
-    rates = hinge_rates(model, turning)
-    i = int(np.argmax(rates))
-    return span * float(rates[i]) / stability_radius(tb), i
+    best, which = -1.0, 0
+    for i, b in enumerate(model.berries):
+        rate = hinge_rate(b, model.gravity, turning)
+        if rate > best:
+            best, which = rate, i
+    return span * best / stability_radius(tb), which
 
 
 def refuse_stiff(model: Model, tb: Tableau, integrator: str, span: float, turning: bool, max_steps: int) -> None:
