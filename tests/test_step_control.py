@@ -28,19 +28,3 @@ def test_pi_control_rejects_fewer_trials_for_no_larger_error(name, monkeypatch):
     assert pi["steps"] + pi["rejected"] <= 1.05 * (i["steps"] + i["rejected"])  # no more trials in all
     assert e_pi <= 1.1 * e_i  # and no larger an error (smaller, in fact, on these scenes)
     assert pi["impacts"] == i["impacts"] == ref.stats["impacts"]
-
-
-@pytest.mark.parametrize("name", ["paper collision", "pre-compressed shaken"])
-def test_a_run_starts_at_the_step_size_it_goes_on_with(name):
-    """docs/solver.md, "The first step": a berry released from rest (its rate's scale is atol) and a pair that starts
-    pressed together both start on the scale of the steps that follow, not tenfold below it as Hairer's estimate with
-    its cap of 100 h0 did (3.2e-5 s then 3.2e-4 s on the paper collision), and the run still meets the tolerance
-    against scipy's solution."""
-    sc = build(bench_scenes()[name])
-    s = grapefmu.Solver(sc, rtol=1e-6, atol=1e-8)
-    first = s.step()
-    second = s.step() - first
-    assert first > second / 3.0
-    ref = grapefmu.simulate(sc, 0.5, method="reference", rtol=1e-12, atol=1e-14, output_interval=1e-3)
-    run = grapefmu.simulate(sc, 0.5, rtol=1e-6, atol=1e-8, output_interval=1e-3)
-    assert float(np.abs(run.angles - ref.angles).max()) < 5e-6  # 1.3e-6 and 6.6e-7 rad

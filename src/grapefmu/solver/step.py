@@ -125,11 +125,7 @@ def rms_norm(x, scale):
 
 @jit
 def initial_step(t0, y0, f0, args, cfg, order, t_stop):
-    """Hairer's starting step size (scipy's select_initial_step) without its cap of 100 h0: h0, the explicit Euler
-    step that moves y by 1 % in the error norm, is tiny when a component starts at zero (a berry released from
-    rest: its rate's scale is atol) and served only to sample the second derivative for h1; with the cap the run
-    spent its first steps growing tenfold a step to where h1 already pointed. A first step h1 too long is rejected
-    and shrunk by its own error estimate, as any step is (docs/solver.md, "The first step")."""
+    """Hairer's starting step size (scipy's select_initial_step)."""
     C, M, X, inp, W, pairs, n_pairs = args
     scale = cfg.atol + cfg.rtol * np.abs(y0)
     d0 = rms_norm(y0, scale)
@@ -144,7 +140,7 @@ def initial_step(t0, y0, f0, args, cfg, order, t_stop):
         h1 = max(1e-6, h0 * 1e-3)
     else:
         h1 = (0.01 / max(d1, d2)) ** (1.0 / (order + 1))
-    return min(h1, cfg.h_max)
+    return min(100 * h0, h1, cfg.h_max)
 
 
 @inline
