@@ -54,7 +54,7 @@ def main(path: str) -> None:
 
     def noop():
         for _ in range(N):
-            s._integrate(s.t, s._scratch, 1)
+            s._integrate(s.t, s._outputs[0], 1)
 
     def python_part():
         compiled_advance = s._advance
