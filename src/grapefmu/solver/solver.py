@@ -30,7 +30,7 @@ from ..results.records import WORK, concat
 from ..results.run import Run
 from . import session as ses
 from . import state as st
-from .stiffness import refuse_stiff
+from .stiffness import least_steps, refuse_stiff
 from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW, grid_last
 from .tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5, Tableau
 
@@ -133,6 +133,8 @@ class Solver:
         self._closed: list[np.ndarray] = []
         # session.advance and .refresh for the types a face's step passes them (compiled.entry), on the first call
         self._advance = self._refresh = None
+        #: at least this many steps per simulated second, set by the stiffest hinge (solver/stiffness.py)
+        self._least_rate = least_steps(self.model, self.tableau, 1.0, self.layout.turning)[0]
         self._session = ses.start(self.M, self.excitation, self.tableau, self.config, initial(self.layout, scene),
                                   float(t_start), np.uint64(self._fingerprint()), s.zeno_max_events)
         # the state's arrays are views on _memory, so that a step's backup and rollback are one copy each
@@ -314,6 +316,8 @@ class Solver:
                 omega = _angular_velocity(angular_velocity)
         if self._plane_normal is not None and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
             self._check_input(a, omega)  # ranges first, then the plane
+        if dt * self._least_rate > self.max_steps and self.fixed_step == 0.0:
+            self._refuse_stiff(dt)
         kept = len(self._closed)
         if self._advance is None:
             self._advance = entry(ses.advance, self._session, dt, held, a, omega_set, omega, self.max_steps)
@@ -329,6 +333,10 @@ class Solver:
         if status != DONE:
             del self._closed[kept:]
             self._fail(status)
+
+    def _refuse_stiff(self, span: float) -> None:
+        """A SolverError naming the hinge too stiff for span within max_steps (stiffness.refuse_stiff)."""
+        refuse_stiff(self.model, self.tableau, self.integrator, span, self.layout.turning, self.max_steps)
 
     def _check_input(self, a: tuple[float, ...], omega: tuple[float, float, float]) -> None:
         """Refuse advance()'s input, naming what is wrong: a value out of its bounds (model/excitation.py), a move
@@ -374,8 +382,8 @@ class Solver:
         s = self.scene.solver
         t_end = s.t_end if t_end is None else float(t_end)
         dt_out = s.output_interval if output_interval is None else float(output_interval)
-        if self.fixed_step == 0.0:
-            refuse_stiff(self.model, self.tableau, self.integrator, t_end - self.t, self.layout.turning, self.max_steps)
+        if self.fixed_step == 0.0 and (t_end - self.t) * self._least_rate > self.max_steps:
+            self._refuse_stiff(t_end - self.t)
         self._save()
         t_start = self.t
         rec = ses.recording(self._session, grid_last(t_start, t_end, dt_out, True) + 2, dt_out, t_end)
