@@ -67,13 +67,13 @@ def test_no_run_takes_fewer_steps_than_the_bound(damping, stiffness, t_end, loos
 def test_a_face_step_too_long_for_the_stiffest_hinge_is_refused_at_once():
     """advance(dt), as the FMU's doStep and the ROS node call it with their own step limit: a dt whose bound passes
     max_steps is refused before a step, the state as it was; a dt within it is stepped, in no fewer steps."""
-    sc = stiff(1000.0)  # at least 7.4e6 steps per simulated second
-    s = grapefmu.Solver(sc, rtol=1e-6, max_steps=1000, driven=True)
+    sc = stiff(1000.0)
+    s = grapefmu.Solver(sc, rtol=1e-6, max_steps=1000, driven=True)  # DOPRI5: at least 1.5e7 steps a second
     before = s.stats
     with pytest.raises(SolverError, match=r"berries\[1\] \('right'\).*max_steps = 1000: .*nothing was run"):
         s.advance(1e-3, base_accel=(0.0,) * 6)
     assert s.t == 0.0 and s.stats == before
-    bound = least_steps(sc.model, s.tableau, 2e-5, s.layout.turning)[0]  # DOPRI5 here: a face steps with it
+    bound = least_steps(sc.model, s.tableau, 2e-5, s.layout.turning)[0]
     assert bound < 1000
     s.advance(2e-5, base_accel=(0.0,) * 6)
     assert s.t == pytest.approx(2e-5) and s.stats["steps"] >= bound

@@ -30,8 +30,8 @@ from ..results.records import WORK, concat
 from ..results.run import Run
 from . import session as ses
 from . import state as st
-from .stiffness import least_steps, refuse_stiff
 from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW, grid_last
+from .stiffness import least_steps, refuse_stiff
 from .tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5, Tableau
 
 #: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
@@ -382,7 +382,7 @@ class Solver:
         s = self.scene.solver
         t_end = s.t_end if t_end is None else float(t_end)
         dt_out = s.output_interval if output_interval is None else float(output_interval)
-        if self.fixed_step == 0.0 and (t_end - self.t) * self._least_rate > self.max_steps:
+        if (t_end - self.t) * self._least_rate > self.max_steps and self.fixed_step == 0.0:
             self._refuse_stiff(t_end - self.t)
         self._save()
         t_start = self.t

@@ -12,6 +12,7 @@ hinge, where before it stepped to the limit (10⁷ steps, tens of seconds) and t
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from ..errors import SolverError
@@ -52,7 +53,8 @@ _RADII: dict[int, tuple[Tableau, float]] = {}
 
 
 def stability_radius(tb: Tableau) -> float:
-    """r_max: the largest |z| of the pair's stability region in Re z ≤ 0 (tests/test_stiffness.py gives each)."""
+    """r_max: the largest |z| of the pair's stability region in Re z ≤ 0, as seen from the origin along each direction
+    (_radius; tests/test_stiffness.py gives each)."""
     known = _RADII.get(id(tb))
     if known is None or known[0] is not tb:
         known = _RADII[id(tb)] = (tb, _radius(stability_polynomial(tb)))
@@ -88,11 +90,12 @@ def refuse_stiff(model: Model, tb: Tableau, integrator: str, span: float, turnin
     if not steps > max_steps:
         return
     b = model.berries[i]
+    rate = hinge_rate(b, model.gravity, turning)
     raise SolverError(
         f"berries[{i}] ({b.name!r}): its hinge is too stiff for the explicit solver ({integrator}) within max_steps = "
         f"{max_steps}: hinge_damping = {b.hinge_damping:g} N·m·s/rad and hinge_stiffness = {b.hinge_stiffness:g} "
         f"N·m/rad on an inertia m l² = {b.mass * b.twig_length ** 2:.3g} kg·m² give a time scale of "
-        f"{1.0 / (steps / span * stability_radius(tb)):.3g} s, so no stable step is longer than "
+        f"{1.0 / rate:.3g} s, so no stable step is longer than "
         f"{span / steps:.3g} s and the {span:g} s asked need at least {steps:.3g} steps; lower its hinge_damping "
         "or hinge_stiffness, give the berry more mass or a longer twig, or allow more steps with max_steps "
         "(docs/reliability.md, 'Known limits'); nothing was run")
