@@ -77,3 +77,23 @@ def test_a_face_step_too_long_for_the_stiffest_hinge_is_refused_at_once():
     assert bound < 1000
     s.advance(2e-5, base_accel=(0.0,) * 6)
     assert s.t == pytest.approx(2e-5) and s.stats["steps"] >= bound
+
+
+def test_a_scene_file_sets_the_step_limit():
+    """solver.max_steps in the scene file is the limit a Solver and simulate keep (the way out the refusal names),
+    checked like every setting."""
+    doc = _dual((0.0, math.pi / 4), right={"hinge_damping": 1000.0}, t_end=1e-3)  # at least 7.4e3 steps
+    doc["solver"]["max_steps"] = 1000
+    with pytest.raises(SolverError, match=r"max_steps = 1000: .*\(solver.max_steps\)"):
+        grapefmu.simulate(build(doc))
+    doc["solver"]["max_steps"] = 100_000
+    sc = build(doc)
+    assert grapefmu.Solver(sc).max_steps == 100_000
+    run = grapefmu.simulate(sc)
+    assert run.t[-1] == pytest.approx(1e-3) and run.stats["steps"] >= least_steps(sc.model, DOP853, 1e-3, False)[0]
+    assert grapefmu.Solver(sc, max_steps=7).max_steps == 7  # a caller's own limit still wins
+    for bad, words in ((0, r"integer in \[1, 1000000000000\], got 0"), (2.5, "integer"), (True, "integer")):
+        doc["solver"]["max_steps"] = bad
+        with pytest.raises(grapefmu.SceneError, match=words) as e:
+            build(doc)
+        assert e.value.key == "solver.max_steps"

@@ -48,7 +48,7 @@ EXCITATION_KEYS = {
     "pose-table": {"kind", "file", "text"},
 }
 SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events",
-               "contact_location", "islands", "integrator"}
+               "max_steps", "contact_location", "islands", "integrator"}
 THRESHOLD_KEYS = {"detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction"}
 
 
@@ -357,15 +357,17 @@ def _solver(raw: Any) -> SolverSettings:
     def setting(name: str) -> float:
         return v.within(f"{key}.{name}", raw.get(name, getattr(d, name)), bound(SolverSettings, name))
 
+    def count(name: str) -> int:
+        b = bound(SolverSettings, name)
+        return v.integer(f"{key}.{name}", raw.get(name, getattr(d, name)), int(b.lo), int(b.hi))
+
     t_end = setting("t_end")
-    zeno = bound(SolverSettings, "zeno_max_events")
     s = SolverSettings(
         method=v.choice(f"{key}.method", raw.get("method", d.method), METHODS),
         rtol=setting("rtol"), atol=setting("atol"), t_end=t_end,
         output_interval=setting("output_interval"),  # at most t_end: s.refusal()
         fixed_step=setting("fixed_step"), zeno_window=setting("zeno_window"),
-        zeno_max_events=v.integer(f"{key}.zeno_max_events", raw.get("zeno_max_events", d.zeno_max_events),
-                                  int(zeno.lo), int(zeno.hi)),
+        zeno_max_events=count("zeno_max_events"), max_steps=count("max_steps"),
         contact_location=v.choice(f"{key}.contact_location", raw.get("contact_location", d.contact_location),
                                   CONTACT_LOCATIONS),
         islands=_islands(f"{key}.islands", raw.get("islands", d.islands)),

@@ -133,14 +133,14 @@ class Islands:
     """A whole run of an event-located scene in multirate islands (`run`); `Solver` arguments as in Solver."""
 
     def __init__(self, scene: Scene, *, rtol: float | None = None, atol: float | None = None,
-                 window: float = WINDOW, max_steps: int = 10_000_000):
+                 window: float = WINDOW, max_steps: int | None = None):
         why = islands_refusal(scene.solver.method, scene.solver.fixed_step)
         if why:
             raise SolverError(f"solver: {why}")
         if not window > 0.0:
             raise SolverError(f"window: must be > 0 s, got {window!r}")
-        self.scene, self.window, self.max_steps = scene, window, max_steps
         self.whole = Solver(scene, rtol=rtol, atol=atol, max_steps=max_steps)  # the start, the settings
+        self.scene, self.window, self.max_steps = scene, window, self.whole.max_steps
         m = scene.model
         self.n = m.n_berries
         self.layout = layout_of(scene)

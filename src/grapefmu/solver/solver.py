@@ -86,7 +86,7 @@ def stopped(status: int, h: float, max_steps: int, pole: tuple[str, float] | Non
         why += (f" ({max_steps} steps; the step size was {h:.3g} s, {1 / h if h > 0 else math.inf:.3g} steps per "
                 "simulated second: a time scale that short, such as a hinge damping or a contact law far stiffer "
                 "than the berry's inertia, is stiff for an explicit solver; change it, or allow more steps with "
-                "max_steps)")
+                "max_steps, solver.max_steps in a scene file)")
     return why
 
 
@@ -94,7 +94,7 @@ class Solver:
     """One simulation in progress. The model is read-only; everything that changes lives in `state`."""
 
     def __init__(self, scene: Scene, *, method: str | None = None, rtol: float | None = None,
-                 atol: float | None = None, fixed_step: float | None = None, max_steps: int = 10_000_000,
+                 atol: float | None = None, fixed_step: float | None = None, max_steps: int | None = None,
                  skin: float | None = None, locate: bool | None = None, t_start: float = 0.0,
                  driven: bool = False):
         """driven: advance()'s inputs may move and turn the rachis (a face: the FMU, the ROS node), whatever the
@@ -115,7 +115,7 @@ class Solver:
                                          s.integrator)
         self.tableau = tableau(self.integrator)
         tighter = DOP853_TOLERANCE if self.integrator == "DOP853" else 1.0
-        self.max_steps = int(max_steps)
+        self.max_steps = int(max_steps if max_steps is not None else s.max_steps)  # the scene's solver.max_steps
         self.model = scene.model
         self.M = scene.arrays
         self.excitation = scene.excitation.arrays

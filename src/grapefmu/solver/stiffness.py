@@ -97,5 +97,5 @@ def refuse_stiff(model: Model, tb: Tableau, integrator: str, span: float, turnin
         f"N·m/rad on an inertia m l² = {b.mass * b.twig_length ** 2:.3g} kg·m² give a time scale of "
         f"{1.0 / rate:.3g} s, so no stable step is longer than "
         f"{span / steps:.3g} s and the {span:g} s asked need at least {steps:.3g} steps; lower its hinge_damping "
-        "or hinge_stiffness, give the berry more mass or a longer twig, or allow more steps with max_steps "
+        "or hinge_stiffness, give the berry more mass or a longer twig, or allow more steps (solver.max_steps) "
         "(docs/reliability.md, 'Known limits'); nothing was run")
