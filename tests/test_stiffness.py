@@ -97,3 +97,18 @@ def test_a_scene_file_sets_the_step_limit():
         with pytest.raises(grapefmu.SceneError, match=words) as e:
             build(doc)
         assert e.value.key == "solver.max_steps"
+
+
+def test_a_fixed_step_that_blows_a_hinge_up_says_which_and_how_short_a_step_holds():
+    """A fixed step past a hinge's stability (the paper method, ode23: h|λ| = 3.03 where its real interval ends at
+    2.51) ends with NaN as before, now naming the hinge and the longest stable step; 0.97 of that step, taken at
+    its word, runs to the end with finite angles."""
+    import re
+
+    sc = stiff(0.03, t_end=0.5)
+    with pytest.raises(SolverError, match=r"NaN or infinite \(berries\[1\] \('right'\).*ode23") as e:
+        grapefmu.simulate(sc, method="paper", fixed_step=1e-3, output_interval=1e-3, cross_check=False)
+    longest = float(re.search(r"a fixed step under ([0-9.e+-]+) s keeps it stable", str(e.value))[1])
+    assert 8e-4 < longest < 1e-3
+    run = grapefmu.simulate(sc, method="paper", fixed_step=0.97 * longest, output_interval=1e-3, cross_check=False)
+    assert run.t[-1] == pytest.approx(0.5) and np.isfinite(run.angles).all()

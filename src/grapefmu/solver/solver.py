@@ -31,7 +31,7 @@ from ..results.run import Run
 from . import session as ses
 from . import state as st
 from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW, grid_last
-from .stiffness import least_steps, refuse_stiff
+from .stiffness import fixed_step_hint, least_steps, refuse_stiff
 from .tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5, Tableau
 
 #: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
@@ -372,6 +372,10 @@ class Solver:
         t, S = self.t, self.state
         why = stopped(status, float(S.integrator.clock["h"][0]), self.max_steps,
                       near_pole(S.physical.y, self.model.berries, self.model.dof))
+        hint = fixed_step_hint(self.model, self.tableau, self.integrator, self.fixed_step) if (
+            status == NOT_FINITE and self.fixed_step > 0.0) else None
+        if hint:
+            why += f" ({hint})"
         self._memory[:] = self._backup
         raise SolverError(f"integration stopped at t = {t:.9g} s: {why}; the state is left at t = {self.t:.9g} s")
 

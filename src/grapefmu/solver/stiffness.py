@@ -33,18 +33,21 @@ def stability_polynomial(tb: Tableau) -> np.ndarray:
     return np.array(coef)
 
 
+def _edge(coef: np.ndarray, direction: complex) -> float:
+    """How far the region reaches from the origin along a unit direction: |R(r d)|² − 1 is a real polynomial in r, and
+    its smallest positive root is where the region seen from the origin ends that way. Islands beyond it about R's far
+    zeros (DOP853's at z = −23.2, |R| < 1 within about 1e-5 of it) are narrower than any step-size controller's
+    spread, and left out."""
+    alpha = coef * direction ** np.arange(len(coef))
+    sq = np.convolve(alpha, alpha.conj()).real
+    sq[0] -= 1.0
+    roots = np.roots(sq[::-1])
+    real = roots[(np.abs(roots.imag) <= 1e-9 * np.abs(roots)) & (roots.real > 1e-6)].real  # r = 0 is a root
+    return float(real.min(initial=np.inf))
+
+
 def _radius(coef: np.ndarray) -> float:
-    """Along each direction e^(iφ), |R(r e^(iφ))|² − 1 is a real polynomial in r; its smallest positive root is where
-    the region seen from the origin ends that way. Islands beyond it about R's far zeros (DOP853's at z = −23.2, |R| < 1
-    within about 1e-5 of it) are narrower than any step-size controller's spread, and left out."""
-    far = 0.0
-    for phi in _ANGLES:
-        alpha = coef * np.exp(1j * phi * np.arange(len(coef)))
-        sq = np.convolve(alpha, alpha.conj()).real
-        sq[0] -= 1.0
-        roots = np.roots(sq[::-1])
-        real = roots[(np.abs(roots.imag) <= 1e-9 * np.abs(roots)) & (roots.real > 1e-6)].real  # r = 0 is a root
-        far = max(far, real.min(initial=np.inf))
+    far = max(_edge(coef, complex(math.cos(phi), math.sin(phi))) for phi in _ANGLES)
     return far * 1.001  # between the directions the edge may reach a little farther: a bound may only be too long
 
 
@@ -99,3 +102,37 @@ def refuse_stiff(model: Model, tb: Tableau, integrator: str, span: float, turnin
         f"{span / steps:.3g} s and the {span:g} s asked need at least {steps:.3g} steps; lower its hinge_damping "
         "or hinge_stiffness, give the berry more mass or a longer twig, or allow more steps (solver.max_steps) "
         "(docs/reliability.md, 'Known limits'); nothing was run")
+
+
+def hinge_eigenvalue(b, gravity: float) -> complex:
+    """Berry b's faster hinge eigenvalue hanging at rest, m l² λ² + c λ + (k + m g l) = 0: an estimate (the pose and
+    the rachis change the pull), where hinge_rate is a bound."""
+    inertia = b.mass * b.twig_length * b.twig_length
+    disc = b.hinge_damping ** 2 - 4.0 * inertia * (b.hinge_stiffness + b.mass * gravity * b.twig_length)
+    if disc >= 0.0:
+        return complex(-(b.hinge_damping + math.sqrt(disc)) / (2.0 * inertia), 0.0)
+    return complex(-b.hinge_damping, math.sqrt(-disc)) / (2.0 * inertia)
+
+
+def fixed_step_hint(model: Model, tb: Tableau, integrator: str, h: float) -> str | None:
+    """Why a fixed step h may have blown a run up: the hinge whose eigenvalue (hinge_eigenvalue) h carries furthest
+    outside the pair's stability region, with the longest step that keeps it inside; None if every one is inside."""
+    coef = stability_polynomial(tb)
+    worst = None
+    for i, b in enumerate(model.berries):
+        lam = hinge_eigenvalue(b, model.gravity)
+        if lam == 0.0:
+            continue
+        reach = _edge(coef, lam / abs(lam))
+        over = h * abs(lam) / reach
+        if over > 1.0 and (worst is None or over > worst[0]):
+            worst = (over, i, lam, reach)
+    if worst is None:
+        return None
+    _, i, lam, reach = worst
+    b = model.berries[i]
+    return (f"berries[{i}] ({b.name!r}): its hinge (hinge_damping = {b.hinge_damping:g} N·m·s/rad, hinge_stiffness = "
+            f"{b.hinge_stiffness:g} N·m/rad, m l² = {b.mass * b.twig_length ** 2:.3g} kg·m²) has an eigenvalue of "
+            f"{abs(lam):.3g} /s hanging, so the fixed step {h:g} s puts hλ {h * abs(lam):.3g} from the origin, beyond "
+            f"the edge of {integrator}'s stability region that way ({reach:.3g}); a fixed step under "
+            f"{reach / abs(lam):.3g} s keeps it stable")
