@@ -1,5 +1,5 @@
-"""How many steps an explicit pair needs at the least for a scene's stiffest hinge, known before the first step
-(docs/reliability.md, "Known limits": stiff scenes).
+"""How many steps an explicit pair needs at the least for a scene's stiffest hinge, known before the first step, and
+which hinge a fixed step blew up (docs/reliability.md, "Known limits": stiff scenes).
 
 An explicit Runge–Kutta step h is stable on y' = λy only while hλ lies in the pair's stability region
 {z : |R(z)| ≤ 1}, R(z) = 1 + Σ_k z^k bᵀ A^(k−1) 𝟙. Its largest radius in the left half-plane, r_max, bounds every
@@ -8,7 +8,9 @@ hinge is such a λ: m l² q̈ = −c q̇ − K q about any pose, with K the hing
 the rachis (at most m l G). The eigenvalues' sum is −c/(m l²) and their product K/(m l²), so the faster one is at
 least max(c / (2 m l²), √(K / (m l²))) in magnitude (a spherical berry's tilt has the smaller inertia m l² cos² s:
 faster still). A run whose bound passes its step limit cannot end: it is refused at once, naming the berry and its
-hinge, where before it stepped to the limit (10⁷ steps, tens of seconds) and then named no berry."""
+hinge, where before it stepped to the limit (10⁷ steps, tens of seconds) and then named no berry. A fixed step past
+a hinge's stability grows its mode every step until the state is NaN; the error then names the hinge and the
+longest stable fixed step (fixed_step_hint, on an estimate of the eigenvalue rather than a bound)."""
 from __future__ import annotations
 
 import math
