@@ -40,7 +40,7 @@ def main() -> None:
     try:
         grapefmu.simulate(sc)
     except SolverError as e:
-        print(f"hinge_damping 1000 over 2 s: refused in {time.perf_counter() - t:.3f} s: {str(e)[:90]}...")
+        print(f"hinge_damping 1000 over 2 s: refused in {1e3 * (time.perf_counter() - t):.2f} ms: {str(e)[:90]}...")
 
 
 if __name__ == "__main__":

@@ -133,8 +133,10 @@ class Solver:
         self._closed: list[np.ndarray] = []
         # session.advance and .refresh for the types a face's step passes them (compiled.entry), on the first call
         self._advance = self._refresh = None
-        #: at least this many steps per simulated second, set by the stiffest hinge (solver/stiffness.py)
-        self._least_rate = least_steps(self.model, self.tableau, 1.0, self.layout.turning)[0]
+        #: at least this many steps per simulated second, set by the stiffest hinge (solver/stiffness.py); a fixed
+        #: step takes the steps it is given, so none
+        self._least_rate = 0.0 if self.fixed_step > 0.0 else least_steps(self.model, self.tableau, 1.0,
+                                                                          self.layout.turning)[0]
         self._session = ses.start(self.M, self.excitation, self.tableau, self.config, initial(self.layout, scene),
                                   float(t_start), np.uint64(self._fingerprint()), s.zeno_max_events)
         # the state's arrays are views on _memory, so that a step's backup and rollback are one copy each
@@ -316,7 +318,7 @@ class Solver:
                 omega = _angular_velocity(angular_velocity)
         if self._plane_normal is not None and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
             self._check_input(a, omega)  # ranges first, then the plane
-        if dt * self._least_rate > self.max_steps and self.fixed_step == 0.0:
+        if dt * self._least_rate > self.max_steps:
             self._refuse_stiff(dt)
         kept = len(self._closed)
         if self._advance is None:
@@ -386,7 +388,7 @@ class Solver:
         s = self.scene.solver
         t_end = s.t_end if t_end is None else float(t_end)
         dt_out = s.output_interval if output_interval is None else float(output_interval)
-        if (t_end - self.t) * self._least_rate > self.max_steps and self.fixed_step == 0.0:
+        if (t_end - self.t) * self._least_rate > self.max_steps:
             self._refuse_stiff(t_end - self.t)
         self._save()
         t_start = self.t
