@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -97,6 +98,36 @@ def test_a_scene_file_sets_the_step_limit():
         with pytest.raises(grapefmu.SceneError, match=words) as e:
             build(doc)
         assert e.value.key == "solver.max_steps"
+
+
+def test_a_face_step_keeps_the_scenes_step_limit(tmp_path):
+    """The FMU's doStep (and the ROS node's tick: both advance a driven Solver) takes the scene's solver.max_steps, the
+    way out its errors name; a scene that does not set it gets 10⁵ a step, where a run gets 10⁷. On a hinge whose 1 ms
+    step needs at least 743 steps of DOP853 (bound) and takes 1586: a limit under the bound is refused before a step,
+    one between the bound and the steps taken stops at the limit, the FMU keeping its state either way."""
+    from grapefmu_fmu.core import DISCARD, FmuCore
+
+    doc = _dual((0.0, math.pi / 4), right={"hinge_damping": 100.0})
+    assert grapefmu.Solver(build(doc)).max_steps == 10_000_000
+
+    def step(max_steps):
+        if max_steps is not None:
+            doc["solver"]["max_steps"] = max_steps
+        path = tmp_path / f"limit{max_steps}.toml"
+        path.write_text(build(doc).source)
+        core = FmuCore(path)
+        assert core.initialize(0.0) is None
+        return core, core.step(0.0, 1e-3)
+
+    core, out = step(None)
+    bound = least_steps(core.scene.model, core.solver.tableau, 1e-3, core.solver.layout.turning)[0]
+    assert out is None and core.solver.max_steps == 100_000 and core.solver.stats["steps"] >= bound
+    taken = core.solver.stats["steps"]
+    for limit, words in ((int(0.7 * bound), rf"max_steps = {int(0.7 * bound)}: .*nothing was run"),
+                         ((int(bound) + taken) // 2, rf"step limit was reached \({(int(bound) + taken) // 2} steps")):
+        core, out = step(limit)
+        assert out is not None and out[0] == DISCARD and re.search(words, out[1]), out
+        assert "solver.max_steps" in out[1] and core.solver.t == 0.0 and core.solver.stats["steps"] == 0
 
 
 def test_a_fixed_step_that_blows_a_hinge_up_says_which_and_how_short_a_step_holds():

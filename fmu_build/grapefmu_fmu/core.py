@@ -52,8 +52,6 @@ DISCARD, ERROR = 2, 3  # FMI 2 and 3 status codes
 PHASES = ("instantiated", "initialization", "step")
 #: the parameters of the scene's [contact] law
 CONTACT_PARAMETERS = ("contact_law", "contact_stiffness", "contact_damping", "restitution")
-#: solver steps one communication step may take: beyond this the step is refused (Discard) in bounded time
-STEP_BUDGET = 100_000
 
 
 def held_inputs(excitation, t) -> np.ndarray:
@@ -232,7 +230,7 @@ class FmuCore:
         try:
             self.scene = self.scene_from_parameters()
             self.start_time = start_time
-            self._use(Solver(self.scene, t_start=start_time, max_steps=STEP_BUDGET, driven=True))
+            self._use(Solver(self.scene, t_start=start_time, driven=True))
             self.error = None
         except GrapefmuError as e:
             self._use(None)
@@ -388,8 +386,7 @@ class FmuCore:
         solver = None
         if state["solver"] is not None:
             same = self.solver is not None and all(values[k] == self.values[k] for k in self._parameters)
-            solver = self.solver if same else Solver(self.scene_from_parameters(values), max_steps=STEP_BUDGET,
-                                                     driven=True)
+            solver = self.solver if same else Solver(self.scene_from_parameters(values), driven=True)
             solver.set_state(state["solver"])  # refuses before anything changes
         self._use(solver)
         if solver is not None:

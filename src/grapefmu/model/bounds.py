@@ -36,14 +36,16 @@ def bounded(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = Fals
 
 def bound(cls: type, name: str) -> Bound:
     """The Bound declared on the field `name` of the dataclass `cls`."""
-    return _bounds(cls)[name]
+    return _bounds(cls)[name][0]
 
 
 def refusal(obj: Any, key: str) -> tuple[str, str] | None:
     """(key.field, why) for the first field of the dataclass `obj` outside its bound, or None (key "" for a top-level
-    object: the field's name alone)."""
-    for name, b in _bounds(type(obj)).items():
+    object: the field's name alone). A field whose default is None may be None: a setting its user decides."""
+    for name, (b, optional) in _bounds(type(obj)).items():
         value = getattr(obj, name)
+        if value is None and optional:
+            continue
         for k, x in enumerate(value) if isinstance(value, tuple) else ((None, value),):
             if isinstance(x, bool) or not isinstance(x, Real) or not b.holds(float(x)):
                 where = f"{key}.{name}" if key else name
@@ -51,12 +53,14 @@ def refusal(obj: Any, key: str) -> tuple[str, str] | None:
     return None
 
 
-_BY_CLASS: dict[type, dict[str, Bound]] = {}
+_BY_CLASS: dict[type, dict[str, tuple[Bound, bool]]] = {}
 
 
-def _bounds(cls: type) -> dict[str, Bound]:
+def _bounds(cls: type) -> dict[str, tuple[Bound, bool]]:
+    """Each bounded field's Bound, and whether it may be None (its default is)."""
     if cls not in _BY_CLASS:
-        _BY_CLASS[cls] = {f.name: f.metadata["bound"] for f in fields(cls) if "bound" in f.metadata}
+        _BY_CLASS[cls] = {f.name: (f.metadata["bound"], f.default is None) for f in fields(cls)
+                          if "bound" in f.metadata}
     return _BY_CLASS[cls]
 
 

@@ -363,9 +363,9 @@ class SolverSettings:
     fixed_step: float = bounded(0.0, 1.0, unit="s", default=0.0)
     zeno_window: float = bounded(0.0, 10.0, lo_open=True, unit="s", default=1e-3)
     zeno_max_events: int = bounded(2, 10**6, default=64)
-    #: accepted steps one run (or one face's step) may take before it stops with a SolverError saying why: a stiff
-    #: scene's way out (docs/reliability.md, "Known limits")
-    max_steps: int = bounded(1, 10**12, default=10_000_000)
+    #: accepted steps one call may take, a run or a face's step, before it stops with a SolverError saying why: a stiff
+    #: scene's way out (docs/reliability.md, "Known limits"). None: 10⁷ a run, 10⁵ a face's step (solver.solver.RUN_MAX_STEPS, FACE_MAX_STEPS)
+    max_steps: int | None = bounded(1, 10**12, default=None)
     #: "events": every contact onset and release is located (needed for Kelvin–Voigt's force jump);
     #: "step-control": the smooth laws (Hertz, Hunt–Crossley) are evaluated inline and the step-size
     #: control alone resolves their onsets (docs/benchmarks.md measures which is cheaper where)
@@ -388,7 +388,7 @@ class SolverSettings:
             if getattr(self, name) not in allowed:
                 return (f"solver.{name}", f"expected one of {', '.join(map(repr, allowed))}, got {getattr(self, name)!r}")
         for name in ("zeno_max_events", "max_steps"):
-            if not isinstance(getattr(self, name), Integral):
+            if not isinstance(getattr(self, name), Integral | None):
                 return (f"solver.{name}", f"expected an integer, got {getattr(self, name)!r}")
         if self.output_interval > self.t_end:
             return ("solver.output_interval", f"expected at most t_end ({self.t_end:g} s), got {self.output_interval:g} s")

@@ -357,9 +357,9 @@ def _solver(raw: Any) -> SolverSettings:
     def setting(name: str) -> float:
         return v.within(f"{key}.{name}", raw.get(name, getattr(d, name)), bound(SolverSettings, name))
 
-    def count(name: str) -> int:
-        b = bound(SolverSettings, name)
-        return v.integer(f"{key}.{name}", raw.get(name, getattr(d, name)), int(b.lo), int(b.hi))
+    def count(name: str) -> int | None:
+        b, given = bound(SolverSettings, name), raw.get(name, getattr(d, name))
+        return None if given is None else v.integer(f"{key}.{name}", given, int(b.lo), int(b.hi))
 
     t_end = setting("t_end")
     s = SolverSettings(

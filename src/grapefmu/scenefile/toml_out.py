@@ -81,7 +81,7 @@ def scene_toml(scene) -> str:
                       if b.spherical else {}),
                    angle=list(q) if b.spherical else q[0], angular_velocity=list(w) if b.spherical else w[0])
     for section, settings in (("solver", scene.solver), ("thresholds", scene.thresholds)):
-        doc[section] = {f.name: getattr(settings, f.name) for f in fields(settings)}
+        doc[section] = {f.name: v for f in fields(settings) if (v := getattr(settings, f.name)) is not None}
     if X.text:  # a table read from a file travels with the scene: a recording replays where the file is not
         doc["excitation"] = {**{k: v for k, v in doc.get("excitation", {}).items() if k != "file"}, "text": X.text}
     text = dumps(doc)

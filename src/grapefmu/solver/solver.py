@@ -48,6 +48,10 @@ DOP853_BELOW_FEW = 1e-5
 FEW_BERRIES = 10
 DOP853_TOLERANCE = 1 / 3
 
+#: accepted steps one call may take where neither its caller nor its scene (solver.max_steps) says: a whole run, and a
+#: face's step (advance of a driven Solver: an FMU's doStep, a ROS node's tick), which a master or an executor waits
+#: for, so it ends in bounded time (well under a second) with an error a master can act on
+RUN_MAX_STEPS, FACE_MAX_STEPS = 10_000_000, 100_000
 #: |cos s| below which a failed run blames a spherical berry's swing for its shrinking steps: the swing–tilt chart
 #: is singular at cos s = 0, and one approaching it stalls the run (|cos s| = 1.2e-3 at steps of 0.6 µs and 1.5e-5
 #: at 80 ps, in a pass that never ended)
@@ -115,7 +119,8 @@ class Solver:
                                          s.integrator)
         self.tableau = tableau(self.integrator)
         tighter = DOP853_TOLERANCE if self.integrator == "DOP853" else 1.0
-        self.max_steps = int(max_steps if max_steps is not None else s.max_steps)  # the scene's solver.max_steps
+        self.max_steps = int(max_steps if max_steps is not None else s.max_steps if s.max_steps is not None else
+                             FACE_MAX_STEPS if driven else RUN_MAX_STEPS)
         self.model = scene.model
         self.M = scene.arrays
         self.excitation = scene.excitation.arrays
