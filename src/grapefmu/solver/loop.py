@@ -19,8 +19,10 @@ from .broadphase import keep_valid, quiet, rebuild, samples_for
 from .drift import drift
 from .events import N_SAMPLES, classify, find_event, switch_pair
 from .sampling import sample_step
-from .step import dense, dense_at, dense_coefficients, error_norm, initial_step, rk_step
+from .step import dense, dense_coefficients, dense_rows, error_norm, initial_step, rk_step
 
+#: output samples record_grid evaluates at a time (its scratch's length: Buffers.grid_theta, .grid_sum)
+GRID_CHUNK = 64
 # statuses
 DONE, OUT_FULL, IMPACTS_FULL, MAX_STEPS, STEP_UNDERFLOW, NOT_FINITE, REFUSED = range(7)  # REFUSED: session.advance
 
@@ -54,6 +56,8 @@ class Buffers(NamedTuple):
     members: np.ndarray  # (N,) or (0,): an island's berries in the scene (handover.form)
     pairs: np.ndarray    # (P,) or (0,): its pairs in the scene
     rows: np.ndarray     # (ny,) or (0,): the scene's component of each of its own (handover.scene_rows)
+    grid_theta: np.ndarray  # (GRID_CHUNK,) θ of the output samples record_grid evaluates at once
+    grid_sum: np.ndarray    # (GRID_CHUNK,) their Horner sums (step.dense_rows)
 
 
 @jit
@@ -68,7 +72,8 @@ def buffers(M, ny, island):
                    np.zeros((M.berry.shape[0], 3)),
                    np.zeros((M.n_dof + 1 if island else 0, 3)), np.zeros(M.berry.shape[0] if island else 0),
                    np.zeros(M.berry.shape[0] if island else 0, np.int64),
-                   np.zeros(M.pair.shape[0] if island else 0, np.int64), np.zeros(ny if island else 0, np.int64))
+                   np.zeros(M.pair.shape[0] if island else 0, np.int64), np.zeros(ny if island else 0, np.int64),
+                   np.zeros(GRID_CHUNK), np.zeros(GRID_CHUNK))
 
 
 @inline
@@ -89,10 +94,11 @@ def grid_last(t0, t, dt, at_end):
 
 
 @jit
-def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
+def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R, theta, acc):
     """Samples on the output grid in (t0, t_commit], and each pair whose contact record the samples hold differs
     from the one logged before (results/contacts.py), at the first new sample's index on the grid (grid_k: the run's
-    sample, whatever the recorder handed over before). Returns False when the recorder is full."""
+    sample, whatever the recorder handed over before); GRID_CHUNK samples at a time (theta, acc: scratch,
+    step.dense_rows). Returns False when the recorder is full."""
     cur = R.cursor[0]
     dt_out = cur.grid_dt
     kg = cur.grid_k
@@ -119,19 +125,19 @@ def record_grid(t0, t_commit, h, y0, q, X, inp, contacts, totals, R):
                 d.mode, d.v_onset, d.smooth = c.mode, c.v_onset, c.smooth
                 n += 1
         cur.n_changes = n
-    ts, ys, accels, tots = R.t, R.y, R.accel, R.totals
-    ny, width = y0.shape[0], ys.shape[1]
-    flat = ys.reshape(ys.size)
+    ts, accels, tots = R.t, R.accel, R.totals
     while kg <= last:
-        tg = min(cur.grid_t0 + kg * dt_out, t_commit)
-        theta = (tg - t0) / h
-        dense_at(theta, y0, q, h, flat, o * width, ny)
-        ts[o] = tg
-        accels[o, 0], accels[o, 1], accels[o, 2], accels[o, 3], accels[o, 4], accels[o, 5] = applied_accel(
-            X, inp, tg, t0)
-        tots[o] = totals[0]
-        o += 1
-        kg += 1
+        n = min(last - kg + 1, GRID_CHUNK)
+        for k in range(n):
+            tg = min(cur.grid_t0 + (kg + k) * dt_out, t_commit)
+            theta[k] = (tg - t0) / h
+            ts[o + k] = tg
+            accels[o + k, 0], accels[o + k, 1], accels[o + k, 2], accels[o + k, 3], accels[o + k, 4], \
+                accels[o + k, 5] = applied_accel(X, inp, tg, t0)
+            tots[o + k] = totals[0]
+        dense_rows(theta, n, y0, q, h, acc, R.y, o)
+        o += n
+        kg += n
     cur.n_out = o
     cur.grid_k = kg
     return True
@@ -235,7 +241,8 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
             theta_e, event = find_event(P.y, q, h, t0, M, C, B.near, B.count[0], Z.suspect, W.berry, samples,
                                         values, Z.rates, work)
         t_commit = t_new if not event or theta_e >= 1.0 else t0 + theta_e * h
-        if R.cursor[0].grid_dt > 0.0 and not record_grid(t0, t_commit, h, P.y, q, X, inp, C, Bk.totals, R):
+        if R.cursor[0].grid_dt > 0.0 and not record_grid(t0, t_commit, h, P.y, q, X, inp, C, Bk.totals, R,
+                                                      Z.grid_theta, Z.grid_sum):
             return OUT_FULL
         ended = sample_step(t0, h, theta_e, P.y, q, M, X, inp, C, B.near, B.count[0], Bk.totals, Bk.pair,
                             Bk.peak_tension, cfg, W, work, fbuf, pwbuf, cls, Z.tension, Z.pushing, samples, sampled,
