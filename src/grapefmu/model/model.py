@@ -364,7 +364,8 @@ class SolverSettings:
     zeno_window: float = bounded(0.0, 10.0, lo_open=True, unit="s", default=1e-3)
     zeno_max_events: int = bounded(2, 10**6, default=64)
     #: accepted steps one call may take, a run or a face's step, before it stops with a SolverError saying why: a stiff
-    #: scene's way out (docs/reliability.md, "Known limits"). None: 10⁷ a run, 10⁵ a face's step (solver.solver.RUN_MAX_STEPS, FACE_MAX_STEPS)
+    #: scene's way out (docs/reliability.md, "Known limits"). None: 10⁷ a run, 10⁵ a face's step
+    #: (solver.solver.RUN_MAX_STEPS, FACE_MAX_STEPS)
     max_steps: int | None = bounded(1, 10**12, default=None)
     #: "events": every contact onset and release is located (needed for Kelvin–Voigt's force jump);
     #: "step-control": the smooth laws (Hertz, Hunt–Crossley) are evaluated inline and the step-size

@@ -19,20 +19,14 @@ def dense(theta, y0, q, h, out):
 @inline
 def dense_head(theta, y0, q, h, out, m):
     """dense() for the first m components only (the angles and rates that events and forces need)."""
-    dense_at(theta, y0, q, h, out, 0, m)
-
-
-@inline
-def dense_at(theta, y0, q, h, out, at, m):
-    """out[at + r] = dense()[r] for r < m."""
     r = 0
     while r + 4 <= m:
         a0, a1, a2, a3 = horner4(theta, q, r)
-        out[at + r], out[at + r + 1], out[at + r + 2], out[at + r + 3] = \
+        out[r], out[r + 1], out[r + 2], out[r + 3] = \
             y0[r] + h * a0, y0[r + 1] + h * a1, y0[r + 2] + h * a2, y0[r + 3] + h * a3
         r += 4
     while r < m:
-        out[at + r] = dense_component(theta, y0, q, h, r)
+        out[r] = dense_component(theta, y0, q, h, r)
         r += 1
 
 
@@ -40,7 +34,7 @@ def dense_at(theta, y0, q, h, out, at, m):
 def dense_rows(theta, n, y0, q, h, acc, out, o):
     """out[o + k, r] = dense(theta[k])[r] for k < n (acc: scratch of n): the output grid's samples of one step. Each
     component's Horner chain runs across the samples, which are independent, so the loop over them vectorises, where
-    dense_at ran one sample's components after another. The same operations in the same order for each element, so
+    the grid ran one sample's components after another (dense_head). The same operations in the same order for each element, so
     the same numbers. The paper collision at rtol 1e-6 (benchmarks/run_breakdown.py "paper collision" 1e-6 1e-4,
     against the code before): 22 to 18–19 ns a sample on a 0.1 ms grid, the run 0.90–0.93 of its time; on the 1 ms
     grid 26 to 20–23 ns, about 1 % of the run."""
