@@ -130,6 +130,22 @@ def test_a_face_step_keeps_the_scenes_step_limit(tmp_path):
         assert "solver.max_steps" in out[1] and core.solver.t == 0.0 and core.solver.stats["steps"] == 0
 
 
+def test_a_run_stopped_at_its_step_limit_in_contact_names_the_pair_and_its_law():
+    """A contact law is stiff only while its pair touches, so it is not refused before a step: a run that stops at its
+    step limit in contact names the pairs touching, their laws and, for Kelvin–Voigt, the time scales m/c and √(m/k)
+    on the pair's mass m. Pressed together (hanging 1 mm into each other) on a damping of 1e4 N·s/m, m/c = 5.5e-7 s:
+    the steps the error reports are the pair's stability limit on that time scale (h ≤ r_max m/c), not accuracy's."""
+    sc = build(_dual(d0=0.026, contact={"law": "kelvin-voigt", "stiffness": 2000.0, "damping": 1e4}, t_end=0.1))
+    s = grapefmu.Solver(sc, rtol=1e-6, max_steps=3000)
+    with pytest.raises(SolverError, match=r"step limit was reached.*in contact when it stopped: left_right "
+                       r"\(kelvin-voigt: stiffness 2e\+03 N/m, damping 1e\+04 N·s/m; m = 0.0055 kg, "
+                       r"m/c = 5.5e-07 s, √\(m/k\) = 0.00166 s\)") as e:
+        s.run()
+    assert s.t == 0.0
+    h = float(re.search(r"the step size was ([0-9.e+-]+) s", str(e.value)).group(1))
+    assert 0.5 * stability_radius(s.tableau) * 5.5e-7 < h <= stability_radius(s.tableau) * 5.5e-7
+
+
 def test_a_fixed_step_that_blows_a_hinge_up_says_which_and_how_short_a_step_holds():
     """A fixed step past a hinge's stability (the paper method, ode23: h|λ| = 3.03 where its real interval ends at
     2.51) ends with NaN as before, now naming the hinge and the longest stable step; 0.97 of that step, taken at

@@ -31,7 +31,7 @@ from ..results.run import Run
 from . import session as ses
 from . import state as st
 from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW, grid_last
-from .stiffness import fixed_step_hint, least_steps, refuse_stiff
+from .stiffness import contact_hint, fixed_step_hint, least_steps, refuse_stiff
 from .tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5, Tableau
 
 #: the broad phase's skin as a fraction of the mean berry radius (benchmarked in docs/benchmarks.md):
@@ -77,10 +77,11 @@ def near_pole(y: np.ndarray, berries, dofs) -> tuple[str, float] | None:
     return best and best[1:]
 
 
-def stopped(status: int, h: float, max_steps: int, pole: tuple[str, float] | None) -> str:
+def stopped(status: int, h: float, max_steps: int, pole: tuple[str, float] | None, contact: str | None = None) -> str:
     """Why a run stopped, for its SolverError: a spherical berry at its chart's pole (pole: near_pole()) when the steps
     shrank without end there, the step limit with the step size that needed so many steps (a stiff scene takes
-    minutes to reach it: say what makes it slow), or the status's text."""
+    minutes to reach it: say what makes it slow) and the pairs in contact then (contact: stiffness.contact_hint), or
+    the status's text."""
     if pole and status in (MAX_STEPS, STEP_UNDERFLOW):
         return (f"spherical berry {pole[0]!r} swung to {math.degrees(pole[1]):.4f}°, where its swing–tilt chart is "
                 "singular (a twig swung sideways flat, docs/model.md §1): the tilt turns ever faster near it and the "
@@ -91,6 +92,8 @@ def stopped(status: int, h: float, max_steps: int, pole: tuple[str, float] | Non
                 "simulated second: a time scale that short, such as a hinge damping or a contact law far stiffer "
                 "than the berry's inertia, is stiff for an explicit solver; change it, or allow more steps with "
                 "max_steps, solver.max_steps in a scene file)")
+        if contact:
+            why += f"; {contact}"
     return why
 
 
@@ -378,7 +381,8 @@ class Solver:
         """Restore the state saved before the call that failed and say why (stopped())."""
         t, S = self.t, self.state
         why = stopped(status, float(S.integrator.clock["h"][0]), self.max_steps,
-                      near_pole(S.physical.y, self.model.berries, self.model.dof))
+                      near_pole(S.physical.y, self.model.berries, self.model.dof),
+                      contact_hint(self.model, S.physical.contacts["mode"]))
         hint = fixed_step_hint(self.model, self.tableau, self.integrator, self.fixed_step) if (
             status == NOT_FINITE and self.fixed_step > 0.0) else None
         if hint:

@@ -10,7 +10,9 @@ least max(c / (2 m l²), √(K / (m l²))) in magnitude (a spherical berry's til
 faster still). A run whose bound passes its step limit cannot end: it is refused at once, naming the berry and its
 hinge, where before it stepped to the limit (10⁷ steps, tens of seconds) and then named no berry. A fixed step past
 a hinge's stability grows its mode every step until the state is NaN; the error then names the hinge and the
-longest stable fixed step (fixed_step_hint, on an estimate of the eigenvalue rather than a bound)."""
+longest stable fixed step (fixed_step_hint, on an estimate of the eigenvalue rather than a bound). A contact law is
+stiff only while its pair touches, so it cannot be refused before a step; a run that stops at its step limit with
+pairs in contact names them and their laws (contact_hint)."""
 from __future__ import annotations
 
 import math
@@ -18,6 +20,7 @@ import math
 import numpy as np
 
 from ..errors import SolverError
+from ..model.contact import LAW_BOUNDS
 from ..model.excitation import MAX_ACCEL
 from ..model.model import Model
 from .tableau import Tableau
@@ -138,3 +141,30 @@ def fixed_step_hint(model: Model, tb: Tableau, integrator: str, h: float) -> str
             f"{abs(lam):.3g} /s hanging, so the fixed step {h:g} s puts hλ {h * abs(lam):.3g} from the origin, beyond "
             f"the edge of {integrator}'s stability region that way ({reach:.3g}); a fixed step under "
             f"{reach / abs(lam):.3g} s keeps it stable")
+
+
+def contact_hint(model: Model, modes: np.ndarray) -> str | None:
+    """The pairs in contact (modes: each pair's mode) and their laws, for a run that stopped at its step limit there: a
+    law far stiffer or more damped than its berries' mass m (m_i m_j / (m_i + m_j) between berries, m_i on an
+    obstacle) shortens the steps while the pair touches; a Kelvin–Voigt law's time scales m/c and √(m/k) are given,
+    a Hertzian law's depend on the overlap. None when no pair touches."""
+    touching = np.flatnonzero(modes)
+    if not len(touching):
+        return None
+    nb, words = model.n_berries, []
+    for p in touching[:3]:
+        pr, law = model.pairs[p], model.pairs[p].law
+        m = model.berries[pr.i].mass
+        if pr.j < nb:
+            m = m * model.berries[pr.j].mass / (m + model.berries[pr.j].mass)
+        units = LAW_BOUNDS[law.law]
+        text = f"{model.pair_name(p)} ({law.kind}: stiffness {law.stiffness:.3g} {units['stiffness'].unit}"
+        if units["damping"].hi > 0.0:  # hertz has none
+            text += f", damping {law.damping:.3g} {units['damping'].unit}"
+        text += f"; m = {m:.3g} kg"
+        if law.kind == "kelvin-voigt":
+            text += f", m/c = {m / law.damping if law.damping > 0 else math.inf:.3g} s, √(m/k) = "
+            text += f"{math.sqrt(m / law.stiffness):.3g} s"
+        words.append(text + ")")
+    more = f" and {len(touching) - 3} more" if len(touching) > 3 else ""
+    return f"in contact when it stopped: {'; '.join(words)}{more}"
