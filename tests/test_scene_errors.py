@@ -36,6 +36,8 @@ from .conftest import dual, scene
     (lambda d: d.update(berries=[]), "berries", "at least one"),
     (lambda d: d["berries"][0].update(kind="spherical", angle=[0.0, 0.0], rest_angles=[1.56, 0.0]),
      "berries[0].rest_angles[0]", "±80°"),
+    (lambda d: d.update(solver={"max_steps": None}), "solver.max_steps", "leave a setting out"),  # no TOML null
+    (lambda d: d["contact"].update(stiffness=None), "contact.stiffness", "got NoneType"),
 ])
 def test_bad_value_is_named(mutate, key, words):
     doc = dual()

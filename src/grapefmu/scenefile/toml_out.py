@@ -8,11 +8,12 @@ import tomllib
 from dataclasses import fields
 from typing import Any
 
-from ..errors import GrapefmuError, SceneError
+from ..errors import SceneError
 from .parse import parse_scene  # (parse imports dumps when it writes a scene built from a dict)
 
 
-def _value(v: Any) -> str:
+def _value(v: Any, key: str) -> str:
+    """v as a TOML value; key names it in the document (berries[1].mass) if it cannot be one."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -26,10 +27,11 @@ def _value(v: Any) -> str:
     if isinstance(v, str):
         return json.dumps(v, ensure_ascii=False)
     if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_value(x) for x in v) + "]"
+        return "[" + ", ".join(_value(x, f"{key}[{i}]") for i, x in enumerate(v)) + "]"
     if isinstance(v, dict):
-        return "{ " + ", ".join(f"{k} = {_value(x)}" for k, x in v.items()) + " }"
-    raise GrapefmuError(f"cannot write {type(v).__name__} {v!r} to a scene TOML")
+        return "{ " + ", ".join(f"{k} = {_value(x, f'{key}.{k}')}" for k, x in v.items()) + " }"
+    raise SceneError(key, f"expected a number, string, boolean, list or table (leave a setting out to take its "
+                          f"default), got {type(v).__name__} {v!r}")
 
 
 def dumps(doc: dict[str, Any]) -> str:
@@ -41,12 +43,12 @@ def dumps(doc: dict[str, Any]) -> str:
         elif isinstance(v, list) and v and all(isinstance(x, dict) for x in v):
             tables.append((k, v, True))
         else:
-            lines.append(f"{k} = {_value(v)}")
+            lines.append(f"{k} = {_value(v, k)}")
     for k, v, many in tables:
-        for item in (v if many else [v]):
+        for i, item in enumerate(v if many else [v]):
             lines.append("")
             lines.append(f"[[{k}]]" if many else f"[{k}]")
-            lines.extend(f"{kk} = {_value(vv)}" for kk, vv in item.items())
+            lines.extend(f"{kk} = {_value(vv, f'{k}[{i}].{kk}' if many else f'{k}.{kk}')}" for kk, vv in item.items())
     return "\n".join(lines) + "\n"
 
 
