@@ -371,3 +371,31 @@ def test_a_recording_carries_the_csv_its_scene_names(tmp_path, monkeypatch, kind
     with pytest.raises(SceneError, match="exactly one") as e:
         parse_scene(dumps({**doc, "excitation": {**inline["excitation"], "file": "motion.csv"}}))
     assert e.value.key == "excitation.file"
+
+
+def test_a_real_time_recording_cut_between_an_intervals_two_messages_is_checked_up_to_the_interval_before(tmp_path):
+    """A node in real time stamps its messages with the wall clock and says where each interval ends in `sim_time`,
+    logged right after the interval's rachis/accel_applied. A file cut between the two has lost where its last
+    interval ends: it is left out. Before, the check took that interval's wall-clock stamp (1.8e9 s) for its end and
+    asked the solver for 1.8e9 s, which it refused (tests/test_ros_node.py's killed node, now and then). Here: the
+    shipped lockstep recording's first 0.2 s, logged at wall-clock times, its last sim_time left out, cut before its
+    data section ends."""
+    wall = 1_796_000_000 * 10**9  # ns: 2026-11-30
+    with open(Path(__file__).parents[1] / "recordings" / "gentle.mcap", "rb") as fh:
+        reader = make_reader(fh)
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages()
+                if m.log_time <= 200_000_000]
+    lost = max(k for k, (_, topic, _, _) in enumerate(msgs) if topic == absolute("sim_time"))
+    path = tmp_path / "realtime.mcap"
+    with McapWriter(path, chunk_size=2048) as w:
+        for name, data in meta.items():
+            w.add_metadata(name, data)
+        for k, (typename, topic, t, data) in enumerate(msgs):
+            if k != lost:
+                w.write(topic, deserialize(data, typename), wall + t)
+    data = path.read_bytes()
+    summary_start = int.from_bytes(data[-28:-20], "little")  # the footer's first field, before its CRC and magic
+    path.write_bytes(data[: summary_start - 13])  # without the data-end record (opcode, length, CRC): cut
+    r = check(path)
+    assert r.truncated and r.ok and r.max_deviation == 0.0 and r.compared == 199
