@@ -373,6 +373,23 @@ def test_a_recording_carries_the_csv_its_scene_names(tmp_path, monkeypatch, kind
     assert e.value.key == "excitation.file"
 
 
+def _real_time_copy(path, t_max: int, leave_out, wall: int = 1_796_000_000 * 10**9) -> None:
+    """The shipped lockstep recording up to `t_max` ns, logged `wall` ns later (a real-time node's stamps: the wall
+    clock's, here 2026-11-30), without the sim_time messages `leave_out` picks out of their indices."""
+    with open(Path(__file__).parents[1] / "recordings" / "gentle.mcap", "rb") as fh:
+        reader = make_reader(fh)
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages()
+                if m.log_time <= t_max]
+    lost = leave_out([k for k, (_, topic, _, _) in enumerate(msgs) if topic == absolute("sim_time")])
+    with McapWriter(path, chunk_size=2048) as w:
+        for name, data in meta.items():
+            w.add_metadata(name, data)
+        for k, (typename, topic, t, data) in enumerate(msgs):
+            if k not in lost:
+                w.write(topic, deserialize(data, typename), wall + t)
+
+
 def test_a_real_time_recording_cut_between_an_intervals_two_messages_is_checked_up_to_the_interval_before(tmp_path):
     """A node in real time stamps its messages with the wall clock and says where each interval ends in `sim_time`,
     logged right after the interval's rachis/accel_applied. A file cut between the two has lost where its last
@@ -380,22 +397,25 @@ def test_a_real_time_recording_cut_between_an_intervals_two_messages_is_checked_
     asked the solver for 1.8e9 s, which it refused (tests/test_ros_node.py's killed node, now and then). Here: the
     shipped lockstep recording's first 0.2 s, logged at wall-clock times, its last sim_time left out, cut before its
     data section ends."""
-    wall = 1_796_000_000 * 10**9  # ns: 2026-11-30
-    with open(Path(__file__).parents[1] / "recordings" / "gentle.mcap", "rb") as fh:
-        reader = make_reader(fh)
-        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages()
-                if m.log_time <= 200_000_000]
-    lost = max(k for k, (_, topic, _, _) in enumerate(msgs) if topic == absolute("sim_time"))
     path = tmp_path / "realtime.mcap"
-    with McapWriter(path, chunk_size=2048) as w:
-        for name, data in meta.items():
-            w.add_metadata(name, data)
-        for k, (typename, topic, t, data) in enumerate(msgs):
-            if k != lost:
-                w.write(topic, deserialize(data, typename), wall + t)
+    _real_time_copy(path, 200_000_000, lambda at: at[-1:])
     data = path.read_bytes()
     summary_start = int.from_bytes(data[-28:-20], "little")  # the footer's first field, before its CRC and magic
     path.write_bytes(data[: summary_start - 13])  # without the data-end record (opcode, length, CRC): cut
     r = check(path)
     assert r.truncated and r.ok and r.max_deviation == 0.0 and r.compared == 199
+
+
+def test_an_interval_without_its_sim_time_in_a_whole_recording_is_refused_by_its_stamp(tmp_path):
+    """Only a cut can lose a sim_time; in a whole file a missing one is damage, and the interval's stamp, the wall
+    clock's in real time, is no end to re-simulate to: the check names the interval instead of asking the solver
+    for 1.8e9 s. A recording with no sim_time at all (a lockstep node's from before it logged them, stamped with
+    simulated time) still ends each interval at its stamp."""
+    path = tmp_path / "realtime.mcap"
+    _real_time_copy(path, 200_000_000, lambda at: at[len(at) // 2:len(at) // 2 + 1])
+    with pytest.raises(RecordingError, match=r"accel_applied is logged at 1796000000\.\d+ s has no sim_time"):
+        check(path)
+    old = tmp_path / "before_sim_time.mcap"
+    _real_time_copy(old, 200_000_000, lambda at: at, wall=0)
+    r = check(old)
+    assert r.ok and r.max_deviation == 0.0 and r.compared == 200

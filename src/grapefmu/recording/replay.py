@@ -384,12 +384,16 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
             raise RecordingError(f"{path}: rachis/twist_applied logged at {_t(stray)} does not follow the "
                                  f"rachis/accel_applied of its interval")
         reached = _by_interval(rec, "joint_states", applied, at)[0]
-        if rec.truncated and sim and applied and applied[-1][0] not in sim:
+        clocked = "sim_time" in rec.topics  # recordings before the node logged sim_time end an interval at its stamp
+        if clocked and rec.truncated and applied and applied[-1][0] not in sim:
             # cut between the last interval's accel_applied and its sim_time: where it ends is lost (in real time
             # its stamp is the wall clock's, not an end), so it is not re-simulated
             applied = applied[:-1]
         for k, (ns, m) in enumerate(applied):
-            t_end = seconds(sim.get(ns, ns))
+            if clocked and ns not in sim:
+                raise RecordingError(f"{path}: the interval whose rachis/accel_applied is logged at {_t(ns)} has no "
+                                     f"sim_time at its stamp, so where it ends is not known")
+            t_end = seconds(sim[ns] if clocked else ns)
             restarted = bisect.bisect_left(starts, at[k]) > bisect.bisect_left(starts, at[k - 1]) if k else False
             if restarted or t_end < solver.t:  # the node was reset (older recordings: its time went back)
                 solver = Solver(scene, driven=driven)
