@@ -146,6 +146,15 @@ def test_a_run_stopped_at_its_step_limit_in_contact_names_the_pair_and_its_law()
     assert 0.5 * stability_radius(s.tableau) * 5.5e-7 < h <= stability_radius(s.tableau) * 5.5e-7
 
 
+def test_a_hertzian_pair_stopped_at_its_step_limit_is_named_without_a_damping():
+    """Hertz's law has no damping coefficient: the pair's words give its stiffness in N/m^1.5 and its mass, and no
+    time scale (a Hertzian one depends on the overlap)."""
+    sc = build(_dual(d0=0.026, contact={"law": "hertz", "stiffness": 1e12}, t_end=0.1))
+    with pytest.raises(SolverError, match=r"in contact when it stopped: left_right \(hertz: stiffness 1e\+12 "
+                       r"N/m\^1\.5; m = 0\.0055 kg\);"):
+        grapefmu.Solver(sc, rtol=1e-6, max_steps=3000).run()
+
+
 def test_a_fixed_step_that_blows_a_hinge_up_says_which_and_how_short_a_step_holds():
     """A fixed step past a hinge's stability (the paper method, ode23: h|λ| = 3.03 where its real interval ends at
     2.51) ends with NaN as before, now naming the hinge and the longest stable step; 0.97 of that step, taken at

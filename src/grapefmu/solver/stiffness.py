@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from ..errors import SolverError
-from ..model.contact import LAW_BOUNDS
+from ..model.contact import LAW_BOUNDS, Law
 from ..model.excitation import MAX_ACCEL
 from ..model.model import Model
 from .tableau import Tableau
@@ -159,7 +159,7 @@ def contact_hint(model: Model, modes: np.ndarray) -> str | None:
             m = m * model.berries[pr.j].mass / (m + model.berries[pr.j].mass)
         units = LAW_BOUNDS[law.law]
         text = f"{model.pair_name(p)} ({law.kind}: stiffness {law.stiffness:.3g} {units['stiffness'].unit}"
-        if units["damping"].hi > 0.0:  # hertz has none
+        if law.law != Law.HERTZ:  # the only law without a damping coefficient
             text += f", damping {law.damping:.3g} {units['damping'].unit}"
         text += f"; m = {m:.3g} kg"
         if law.kind == "kelvin-voigt":
