@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from grapefmu.cluster import ClusterSpec, RowSpec, cluster_scene, row_scene
-from grapefmu.errors import SceneError
+from grapefmu.errors import SceneError, SolverError
 from grapefmu.model import ContactPair, Model
 from grapefmu.model import model as model_module
 from grapefmu.model.model import SolverSettings
@@ -351,3 +351,24 @@ def test_a_windows_islands_get_exactly_their_own_parts():
         both = [q for q, (i, j) in enumerate(coupled) if i in own and j in own]
         assert list(couplings[c_off[k]:c_off[k + 1]]) == both
     assert m_off[-1] == np.isin(label, which).sum() and p_off[-1] < len(pi)
+
+
+def test_islands_hold_a_run_to_its_step_limit_as_one_solver_does():
+    """A run's step limit is the run's in islands too: a hinge too stiff for it is refused before a step, naming the
+    berry, where islands, whose limit holds per island and window, ran it (here 0.2 s of a hinge that needs at least
+    1.5e4 steps, under a limit of 10⁴: 1.5e3 a window); and a run that stops at the limit in contact names the pair
+    touching, as one Solver's does (stiffness.contact_hint; the island's pairs by their names in the scene)."""
+    solver = {"rtol": 1e-8, "atol": 1e-10, "t_end": 0.2, "output_interval": 1e-3}
+    doc = row_scene(RowSpec(berries=6, solver=solver))
+    doc["berries"][2]["hinge_damping"] = 10.0
+    sc = scene_from_dict(doc, Path.cwd())
+    with pytest.raises(SolverError, match=r"berries\[2\].*nothing was run") as one:
+        Solver(sc, max_steps=10_000).run()
+    with pytest.raises(SolverError) as isl:
+        Islands(sc, max_steps=10_000).run()
+    assert str(isl.value) == str(one.value)
+    pressed = scene_from_dict(row_scene(RowSpec(berries=6, pitch=0.026, angles=(0.0,) * 6, solver=solver, contact={
+        "law": "kelvin-voigt", "stiffness": 2000.0, "damping": 1e4})), Path.cwd())
+    with pytest.raises(SolverError, match=r"step limit was reached.*in contact when it stopped: b\d+_b\d+ "
+                       r"\(kelvin-voigt: stiffness 2e\+03 N/m, damping 1e\+04 N·s/m; m = 0.0055 kg, m/c = 5.5e-07 s"):
+        Islands(pressed, max_steps=3000).run()

@@ -33,6 +33,7 @@ from .loop import IMPACTS_FULL, OUT_FULL, grid_last
 from .drift import components, joined, regrouped, slack
 from .handover import flush_all, form_all, parts, retire_all
 from .solver import Solver, near_pole, open_impacts, run_stats, stopped
+from .stiffness import contact_hint
 
 #: the default window, s: long enough that a window's calls cost little against its steps, short enough that
 #: berries stay near their extrapolated paths (`grapefmu bench --scale` measures other lengths)
@@ -238,12 +239,15 @@ class Islands:
             if status == OUT_FULL:
                 ses.grow(s)
             elif status != IMPACTS_FULL:
-                S = ses.views(s)[0]
+                S, seg, m = ses.views(s)[0], batch.segs[k], self.scene.model
                 t, h = S.physical.t[0], float(S.integrator.clock["h"][0])
-                berries = [self.scene.model.berries[m] for m in batch.segs[k].members]
+                berries = [m.berries[i] for i in seg.members]
                 pole = near_pole(S.physical.y, berries, np.cumsum([0] + [b.ndof for b in berries]))
+                modes = np.zeros(len(m.pairs), dtype=S.physical.contacts["mode"].dtype)
+                modes[seg.pairs] = S.physical.contacts["mode"][:len(seg.pairs)]  # the island's pairs in the scene's
+                why = stopped(status, h, self.max_steps, pole, contact_hint(m, modes))
                 ses.rollback(s, batch.saved[k])
-                raise SolverError(f"integration stopped at t = {t:.9g} s: {stopped(status, h, self.max_steps, pole)}")
+                raise SolverError(f"integration stopped at t = {t:.9g} s: {why}")
 
     def _slack(self, span: float) -> np.ndarray:
         """For each berry-berry pair, a lower bound on its gap over the window (drift.slack)."""
@@ -320,6 +324,8 @@ class Islands:
         self.dt = dt = s.output_interval if output_interval is None else float(output_interval)
         self.t0 = t0 = self.whole.t
         self.t_end = t_end
+        # the run's step limit, as one Solver's: the stiffest hinge's island alone takes at least its steps
+        self.whole.refuse_stiff(t_end - t0)
         self.n_samples = n = grid_last(t0, t_end, dt, True) + 1
         self.per = per = max(1, int(round(self.window / dt)))
         self._start()

@@ -326,8 +326,7 @@ class Solver:
                 omega = _angular_velocity(angular_velocity)
         if self._plane_normal is not None and (a[3] or a[4] or a[5] or omega[0] or omega[1] or omega[2]):
             self._check_input(a, omega)  # ranges first, then the plane
-        if dt * self._least_rate > self.max_steps:
-            self._refuse_stiff(dt)
+        self.refuse_stiff(dt)
         kept = len(self._closed)
         if self._advance is None:
             self._advance = entry(ses.advance, self._session, dt, held, a, omega_set, omega, self.max_steps)
@@ -344,9 +343,11 @@ class Solver:
             del self._closed[kept:]
             self._fail(status)
 
-    def _refuse_stiff(self, span: float) -> None:
-        """A SolverError naming the hinge too stiff for span within max_steps (stiffness.refuse_stiff)."""
-        refuse_stiff(self.model, self.tableau, self.integrator, span, self.layout.turning, self.max_steps)
+    def refuse_stiff(self, span: float) -> None:
+        """A SolverError, before a step, if the stiffest hinge alone needs more than max_steps over span
+        (stiffness.refuse_stiff, which names it); a test of one product when it does not."""
+        if span * self._least_rate > self.max_steps:
+            refuse_stiff(self.model, self.tableau, self.integrator, span, self.layout.turning, self.max_steps)
 
     def _check_input(self, a: tuple[float, ...], omega: tuple[float, float, float]) -> None:
         """Refuse advance()'s input, naming what is wrong: a value out of its bounds (model/excitation.py), a move
@@ -397,8 +398,7 @@ class Solver:
         s = self.scene.solver
         t_end = s.t_end if t_end is None else float(t_end)
         dt_out = s.output_interval if output_interval is None else float(output_interval)
-        if (t_end - self.t) * self._least_rate > self.max_steps:
-            self._refuse_stiff(t_end - self.t)
+        self.refuse_stiff(t_end - self.t)
         self._save()
         t_start = self.t
         rec = ses.recording(self._session, grid_last(t_start, t_end, dt_out, True) + 2, dt_out, t_end)
