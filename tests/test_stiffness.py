@@ -146,13 +146,36 @@ def test_a_run_stopped_at_its_step_limit_in_contact_names_the_pair_and_its_law()
     assert 0.5 * stability_radius(s.tableau) * 5.5e-7 < h <= stability_radius(s.tableau) * 5.5e-7
 
 
-def test_a_hertzian_pair_stopped_at_its_step_limit_is_named_without_a_damping():
-    """Hertz's law has no damping coefficient: the pair's words give its stiffness in N/m^1.5 and its mass, and no
-    time scale (a Hertzian one depends on the overlap)."""
-    sc = build(_dual(d0=0.026, contact={"law": "hertz", "stiffness": 1e12}, t_end=0.1))
-    with pytest.raises(SolverError, match=r"in contact when it stopped: left_right \(hertz: stiffness 1e\+12 "
-                       r"N/m\^1\.5; m = 0\.0055 kg\);"):
-        grapefmu.Solver(sc, rtol=1e-6, max_steps=3000).run()
+@pytest.mark.parametrize("law, coefficients", [("hertz", "stiffness 1e+12 N/m^1.5"),
+                                                ("hunt-crossley", "stiffness 1e+12 N/m^1.5, damping 0.5 (χ, dimensionless)")])
+def test_a_hertzian_pair_stopped_at_its_step_limit_is_named_with_its_time_scales_at_the_overlap(law, coefficients):
+    """A Hertzian law has no fixed time scale: the pair's words give its coefficients, its mass and, at the overlap δ
+    when it stopped, its stiffness k = dF/dδ = 1.5 K √δ and √(m/k); Hunt–Crossley's also its damping there,
+    c = ∂F/∂δ̇ = χ K δ^1.5 / δ̇⁻, and m/c. The run stops after exactly max_steps accepted steps (it took 5000
+    before, the loop's chunk): one Solver stepped that many times by step() stands where the run stopped, and its
+    own observation and contact record give the overlap and the onset speed δ̇⁻ the figures come from."""
+    contact = {"law": law, "stiffness": 1e12, **({"damping": 0.5} if law == "hunt-crossley" else {})}
+    sc = build(_dual(d0=0.026, contact=contact, t_end=0.1))
+    with pytest.raises(SolverError, match=re.escape(f"in contact when it stopped: left_right ({law}: {coefficients}; "
+                                                    "m = 0.0055 kg; at δ = ")) as e:
+        grapefmu.Solver(sc, rtol=1e-6, max_steps=3).run()  # pressed 1 mm: the first 5 steps are in contact
+    words = str(e.value)
+    number = "([0-9.e+-]+|inf)"
+    t = float(re.search(rf"stopped at t = {number} s", words)[1])
+    d, k = (float(x) for x in re.search(rf"at δ = {number} m, k = {number} N/m", words).groups())
+    tau_k = float(re.search(rf"√\(m/k\) = {number} s\)", words)[1])
+    stepped = grapefmu.Solver(sc, rtol=1e-6)
+    for _ in range(3):
+        stepped.step()
+    assert stepped.t == pytest.approx(t, rel=1e-8)
+    assert d == pytest.approx(float(stepped.observe().penetration[0, 0]), rel=5e-3)
+    assert k == pytest.approx(1.5e12 * math.sqrt(d), rel=5e-3) and tau_k == pytest.approx(math.sqrt(0.0055 / k), rel=5e-3)
+    if law == "hunt-crossley":
+        c, tau_c = (float(x) for x in re.search(rf"c = {number} N·s/m, m/c = {number} s", words).groups())
+        v_onset = float(stepped.state.physical.contacts["v_onset"][0])
+        assert c == pytest.approx(0.5 * 1e12 * d ** 1.5 / v_onset, rel=1e-2) and tau_c == pytest.approx(0.0055 / c, rel=5e-3)
+    else:
+        assert "m/c" not in words and "damping" not in words.split("left_right")[1]
 
 
 def test_a_fixed_step_that_blows_a_hinge_up_says_which_and_how_short_a_step_holds():

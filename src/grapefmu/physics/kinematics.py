@@ -308,6 +308,13 @@ def penetrations(y, M, out):
     _penetrations(_padded(y, M), M, out)
 
 
+def overlaps(y, M) -> np.ndarray:
+    """δ of every candidate pair at y, m (penetrations, into a new array)."""
+    out = np.empty(M.pair.shape[0])
+    penetrations(y, M, out)
+    return out
+
+
 def deepest_overlap(y, M, fraction: float) -> tuple[int, float, float] | None:
     """(pair, δ, bound) of the pair at y whose overlap passes `fraction` of its smaller radius (a berry's own against
     an obstacle) by the most, or None."""
@@ -316,8 +323,7 @@ def deepest_overlap(y, M, fraction: float) -> tuple[int, float, float] | None:
         return None
     r = M.berry["radius"]
     bound = fraction * np.where(j < nb, np.minimum(r[i], r[np.minimum(j, nb - 1)]), r[i])
-    delta = np.empty(i.size)
-    penetrations(y, M, delta)
+    delta = overlaps(y, M)
     p = int(np.argmax(delta - bound))
     return (p, float(delta[p]), float(bound[p])) if delta[p] > bound[p] else None
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import SolverError
 from ..model.model import Scene, islands_refusal
+from ..physics.kinematics import overlaps
 from ..physics.layout import layout_of
 from ..results.contacts import ContactLog
 from ..results.impacts import Impacts
@@ -243,9 +244,11 @@ class Islands:
                 t, h = S.physical.t[0], float(S.integrator.clock["h"][0])
                 berries = [m.berries[i] for i in seg.members]
                 pole = near_pole(S.physical.y, berries, np.cumsum([0] + [b.ndof for b in berries]))
-                modes = np.zeros(len(m.pairs), dtype=S.physical.contacts["mode"].dtype)
-                modes[seg.pairs] = S.physical.contacts["mode"][:len(seg.pairs)]  # the island's pairs in the scene's
-                why = stopped(status, h, self.max_steps, pole, contact_hint(m, modes))
+                contacts = np.zeros(len(m.pairs), dtype=S.physical.contacts.dtype)  # the island's pairs in the scene's
+                contacts[seg.pairs] = S.physical.contacts[:len(seg.pairs)]
+                delta = np.zeros(len(m.pairs))
+                delta[seg.pairs] = overlaps(S.physical.y, ses.model(s))[:len(seg.pairs)]
+                why = stopped(status, h, self.max_steps, pole, contact_hint(m, contacts, delta))
                 ses.rollback(s, batch.saved[k])
                 raise SolverError(f"integration stopped at t = {t:.9g} s: {why}")
 

@@ -28,8 +28,8 @@ from .events import classify, open_impact
 from .loop import DONE, REFUSED, buffers, integrate
 from .state import CHANGE, TOTALS, Recorder, recorder, zeros
 
-__all__ = ["Session", "advance", "derivative", "grow", "island", "labels", "listed", "preview", "previews", "put",
-           "outputs", "recording", "refresh", "restart", "resume", "rollback", "run", "start", "take_impacts",
+__all__ = ["Session", "advance", "derivative", "grow", "island", "labels", "listed", "model", "preview", "previews",
+           "put", "outputs", "recording", "refresh", "restart", "resume", "rollback", "run", "start", "take_impacts",
            "take_last", "views", "windows"]
 
 _KELVIN_VOIGT = int(Law.KELVIN_VOIGT)
@@ -168,6 +168,12 @@ def rollback(s, saved):
 def views(s):
     """(state, memory, backup) of session s as Python reads them (views, not copies)."""
     return s.state, s.memory, s.backup
+
+
+@jit
+def model(s):
+    """Session s's model arrays (an island's: its berries' and pairs' rows, handover.form), for a failure's words."""
+    return s.model
 
 
 @jit

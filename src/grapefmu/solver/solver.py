@@ -21,7 +21,7 @@ from ..model.model import MAX_OVERLAP_FRACTION, Scene, off_axis
 from ..physics import observe as obs
 from ..physics.compiled import entry
 from ..physics.excitation import ACCEL_COMPONENTS, base_accel
-from ..physics.kinematics import deepest_overlap
+from ..physics.kinematics import deepest_overlap, overlaps
 from ..physics.layout import LEDGER_TERMS, angular_velocity, displacement, initial, ledger, layout_of, orientation
 from ..results import catalogue
 from ..results.contacts import ContactLog
@@ -383,7 +383,7 @@ class Solver:
         t, S = self.t, self.state
         why = stopped(status, float(S.integrator.clock["h"][0]), self.max_steps,
                       near_pole(S.physical.y, self.model.berries, self.model.dof),
-                      contact_hint(self.model, S.physical.contacts["mode"]))
+                      contact_hint(self.model, S.physical.contacts, overlaps(S.physical.y, self.M)))
         hint = fixed_step_hint(self.model, self.tableau, self.integrator, self.fixed_step) if (
             status == NOT_FINITE and self.fixed_step > 0.0) else None
         if hint:
@@ -406,9 +406,12 @@ class Solver:
         start = rec.logged.copy()
         chunks, changes, impacts = [], [], []  # what a full recorder handed over (rare: it is sized for the whole run)
         wall = time.perf_counter()
-        chunk, steps = 5000, 0
+        # the step limit counts the accepted steps since this call began, across the loop's returns (a full
+        # recorder returns mid-chunk); a chunk's return lets progress be shown
+        chunk, counted = 5000, self.state.book.counters["steps"]
+        first = int(counted[0])
         while True:
-            status = self._integrate(t_end, rec, chunk)
+            status = self._integrate(t_end, rec, min(chunk, self.max_steps - (int(counted[0]) - first)))
             if status == IMPACTS_FULL:
                 impacts.append(rec.impacts[: int(cur["n_impacts"][0])].copy())
                 cur["n_impacts"] = 0
@@ -420,10 +423,9 @@ class Solver:
                 cur["n_out"], cur["n_changes"] = 0, 0
                 continue
             if status == MAX_STEPS:
-                steps += chunk
                 if progress:
                     progress(self.t, t_end)
-                if steps < self.max_steps:
+                if int(counted[0]) - first < self.max_steps:
                     continue
             break
         if status != DONE:

@@ -143,12 +143,14 @@ def fixed_step_hint(model: Model, tb: Tableau, integrator: str, h: float) -> str
             f"{reach / abs(lam):.3g} s keeps it stable")
 
 
-def contact_hint(model: Model, modes: np.ndarray) -> str | None:
-    """The pairs in contact (modes: each pair's mode) and their laws, for a run that stopped at its step limit there: a
-    law far stiffer or more damped than its berries' mass m (m_i m_j / (m_i + m_j) between berries, m_i on an
-    obstacle) shortens the steps while the pair touches; a Kelvin–Voigt law's time scales m/c and √(m/k) are given,
-    a Hertzian law's depend on the overlap. None when no pair touches."""
-    touching = np.flatnonzero(modes)
+def contact_hint(model: Model, contacts: np.ndarray, delta: np.ndarray) -> str | None:
+    """The pairs in contact (contacts: each pair's CONTACT record; delta: its overlap δ, m) and their laws, for a run
+    that stopped at its step limit there: a law far stiffer or more damped than its berries' mass m (m_i m_j /
+    (m_i + m_j) between berries, m_i on an obstacle) shortens the steps while the pair touches. Each law's time
+    scales on m: Kelvin–Voigt's m/c and √(m/k); a Hertzian law's √(m/k) on its stiffness at the overlap,
+    k = dF/dδ = 1.5 K √δ, and Hunt–Crossley's also m/c on its damping there, c = ∂F/∂δ̇ = χ K δ^1.5 / δ̇⁻ (docs/model.md
+    §3). None when no pair touches."""
+    touching = np.flatnonzero(contacts["mode"])
     if not len(touching):
         return None
     nb, words = model.n_berries, []
@@ -162,9 +164,18 @@ def contact_hint(model: Model, modes: np.ndarray) -> str | None:
         if law.law != Law.HERTZ:  # the only law without a damping coefficient
             text += f", damping {law.damping:.3g} {units['damping'].unit}"
         text += f"; m = {m:.3g} kg"
-        if law.kind == "kelvin-voigt":
-            text += f", m/c = {m / law.damping if law.damping > 0 else math.inf:.3g} s, √(m/k) = "
-            text += f"{math.sqrt(m / law.stiffness):.3g} s"
+        if law.law == Law.KELVIN_VOIGT:
+            k, c = law.stiffness, law.damping
+        else:
+            d = max(float(delta[p]), 0.0)
+            k = 1.5 * law.stiffness * math.sqrt(d)
+            c = law.damping * law.stiffness * d * math.sqrt(d) / float(contacts["v_onset"][p])
+            text += f"; at δ = {d:.3g} m, k = {k:.3g} N/m"
+            if law.law == Law.HUNT_CROSSLEY:
+                text += f", c = {c:.3g} N·s/m"
+        if law.law != Law.HERTZ:
+            text += f", m/c = {m / c if c > 0 else math.inf:.3g} s"
+        text += f", √(m/k) = {math.sqrt(m / k) if k > 0 else math.inf:.3g} s"
         words.append(text + ")")
     more = f" and {len(touching) - 3} more" if len(touching) > 3 else ""
     return f"in contact when it stopped: {'; '.join(words)}{more}"
