@@ -84,6 +84,25 @@ def test_a_step_the_solver_cannot_finish_leaves_the_state(collision_scene):
     assert same_state(before, s.state)
 
 
+def test_a_step_holds_its_step_limit_across_a_full_impact_list():
+    """advance's max_steps counts the step's accepted steps across the loop's returns: the shaken stiff pair's 10 s in
+    one step take 1612 steps and 230 impacts, so the session's impact list (64) fills three times on the way. With a
+    limit of 1611 the step is refused; before, each return restarted the count and it ran to the end."""
+    from grapefmu.bench.scenes import bench_scenes, build
+    sc = build(bench_scenes()["shaken stiff pair"])
+    whole = Solver(sc, rtol=1e-6, atol=1e-8)
+    whole.advance(sc.solver.t_end)
+    steps, impacts = whole.stats["steps"], whole.stats["impacts"]
+    assert impacts > 3 * 64
+    short = Solver(sc, rtol=1e-6, atol=1e-8, max_steps=steps - 1)
+    with pytest.raises(SolverError, match=rf"step limit was reached \({steps - 1} steps"):
+        short.advance(sc.solver.t_end)
+    assert short.t == 0.0 and short.stats["steps"] == 0
+    exact = Solver(sc, rtol=1e-6, atol=1e-8, max_steps=steps)
+    exact.advance(sc.solver.t_end)
+    assert exact.t == whole.t and exact.stats["impacts"] == impacts
+
+
 @pytest.mark.parametrize("ny, npair, n, stages, k, zeno_max", [(13, 1, 2, 7, 5, 8), (61, 0, 7, 13, 7, 3),
                                                                (20, 45, 10, 7, 5, 8)])
 def test_every_array_of_a_state_lies_apart_in_its_one_buffer(ny, npair, n, stages, k, zeno_max):

@@ -146,8 +146,8 @@ def test_a_run_stopped_at_its_step_limit_in_contact_names_the_pair_and_its_law()
     assert 0.5 * stability_radius(s.tableau) * 5.5e-7 < h <= stability_radius(s.tableau) * 5.5e-7
 
 
-@pytest.mark.parametrize("law, coefficients", [("hertz", "stiffness 1e+12 N/m^1.5"),
-                                                ("hunt-crossley", "stiffness 1e+12 N/m^1.5, damping 0.5 (χ, dimensionless)")])
+@pytest.mark.parametrize("law, coefficients", [
+    ("hertz", "stiffness 1e+12 N/m^1.5"), ("hunt-crossley", "stiffness 1e+12 N/m^1.5, damping 0.5 (χ, dimensionless)")])
 def test_a_hertzian_pair_stopped_at_its_step_limit_is_named_with_its_time_scales_at_the_overlap(law, coefficients):
     """A Hertzian law has no fixed time scale: the pair's words give its coefficients, its mass and, at the overlap δ
     when it stopped, its stiffness k = dF/dδ = 1.5 K √δ and √(m/k); Hunt–Crossley's also its damping there,
@@ -169,11 +169,13 @@ def test_a_hertzian_pair_stopped_at_its_step_limit_is_named_with_its_time_scales
         stepped.step()
     assert stepped.t == pytest.approx(t, rel=1e-8)
     assert d == pytest.approx(float(stepped.observe().penetration[0, 0]), rel=5e-3)
-    assert k == pytest.approx(1.5e12 * math.sqrt(d), rel=5e-3) and tau_k == pytest.approx(math.sqrt(0.0055 / k), rel=5e-3)
+    assert k == pytest.approx(1.5e12 * math.sqrt(d), rel=5e-3)
+    assert tau_k == pytest.approx(math.sqrt(0.0055 / k), rel=5e-3)
     if law == "hunt-crossley":
         c, tau_c = (float(x) for x in re.search(rf"c = {number} N·s/m, m/c = {number} s", words).groups())
         v_onset = float(stepped.state.physical.contacts["v_onset"][0])
-        assert c == pytest.approx(0.5 * 1e12 * d ** 1.5 / v_onset, rel=1e-2) and tau_c == pytest.approx(0.0055 / c, rel=5e-3)
+        assert c == pytest.approx(0.5 * 1e12 * d ** 1.5 / v_onset, rel=1e-2)
+        assert tau_c == pytest.approx(0.0055 / c, rel=5e-3)
     else:
         assert "m/c" not in words and "damping" not in words.split("left_right")[1]
 

@@ -338,10 +338,18 @@ class Solver:
             self._closed_into(self._outputs[0])
             if status != IMPACTS_FULL:
                 break
-            status, t_target, n_impacts = ses.resume(self._session, t_target, self.max_steps)
+            status, t_target, n_impacts = ses.resume(self._session, t_target, self.max_steps - self._steps_since_save())
         if status != DONE:
             del self._closed[kept:]
             self._fail(status)
+
+    def _steps_since_save(self) -> int:
+        """Accepted steps since the state was last saved (advance's start): the count now less the one in the
+        backup, read at the counters' place in it (a rare path: a step's impact list filled)."""
+        counters = self.state.book.counters
+        saved = np.frombuffer(self._backup, dtype=counters.dtype, count=1,
+                              offset=counters.ctypes.data - self._memory.ctypes.data)
+        return int(counters["steps"][0]) - int(saved["steps"][0])
 
     def refuse_stiff(self, span: float) -> None:
         """A SolverError, before a step, if the stiffest hinge alone needs more than max_steps over span
