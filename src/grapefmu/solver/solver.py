@@ -344,8 +344,8 @@ class Solver:
             self._fail(status)
 
     def _steps_since_save(self) -> int:
-        """Accepted steps since the state was last saved (advance's start): the count now less the one in the
-        backup, read at the counters' place in it (a rare path: a step's impact list filled)."""
+        """Accepted steps since the state was last saved (a run's or a step's start): the count now less the one in
+        the backup, read at the counters' place in it (for the step limit, after the loop returned early)."""
         counters = self.state.book.counters
         saved = np.frombuffer(self._backup, dtype=counters.dtype, count=1,
                               offset=counters.ctypes.data - self._memory.ctypes.data)
@@ -414,12 +414,13 @@ class Solver:
         start = rec.logged.copy()
         chunks, changes, impacts = [], [], []  # what a full recorder handed over (rare: it is sized for the whole run)
         wall = time.perf_counter()
-        # the step limit counts the accepted steps since this call began, across the loop's returns (a full
-        # recorder returns mid-chunk); a chunk's return lets progress be shown
-        chunk, counted = 5000, self.state.book.counters["steps"]
-        first = int(counted[0])
+        # the step limit counts the accepted steps since the save, across the loop's returns (a full recorder
+        # returns mid-chunk); a chunk's return lets progress be shown
+        chunk, left = 5000, self.max_steps
         while True:
-            status = self._integrate(t_end, rec, min(chunk, self.max_steps - (int(counted[0]) - first)))
+            status = self._integrate(t_end, rec, min(chunk, left))
+            if status != DONE:
+                left = self.max_steps - self._steps_since_save()
             if status == IMPACTS_FULL:
                 impacts.append(rec.impacts[: int(cur["n_impacts"][0])].copy())
                 cur["n_impacts"] = 0
@@ -433,7 +434,7 @@ class Solver:
             if status == MAX_STEPS:
                 if progress:
                     progress(self.t, t_end)
-                if int(counted[0]) - first < self.max_steps:
+                if left > 0:
                     continue
             break
         if status != DONE:
