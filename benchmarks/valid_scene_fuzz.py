@@ -4,7 +4,9 @@ SolverError that says why (a hinge too stiff for the step limit, refused before 
 scene; a spherical berry at its chart's pole). Anything else
 (an exception of another kind, a NaN in the samples) is printed with its seed and scene, and counted. A finished
 run whose energy ledger does not close to its tolerance (results/trust.py: the warning the run itself gives) is
-counted too, with the tightest rtol among them: the conservation law as an independent check of the result.
+counted too, with the tightest rtol among them: the conservation law as an independent check of the result; so is
+one warned of a pair pressed beyond the depth a contact law holds at (results/trust.py, overlap_warning), and a run
+stopped at the step limit prints the first pair it names in contact (stiffness.contact_hint).
 docs/reliability.md gives the figures of one run.
 Run: .venv/bin/python benchmarks/valid_scene_fuzz.py [first_seed] [count]   (default 150 300)
      .venv/bin/python benchmarks/valid_scene_fuzz.py --converge SEED   (a warned run again at tighter tolerances)"""
@@ -22,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from grapefmu.errors import SceneError, SolverError
-from grapefmu.results.trust import ledger_assessment, ledger_warning
+from grapefmu.results.trust import ledger_assessment, ledger_warning, overlap_warning
 from grapefmu.scenefile import scene_from_dict
 from grapefmu.solver.solver import Solver
 
@@ -116,8 +118,10 @@ def main(first: int = 150, count: int = 300) -> None:
                 tau = min((b.mass * b.twig_length ** 2 / b.hinge_damping, b.name) for b in sc.model.berries
                           if b.hinge_damping > 0) if any(b.hinge_damping > 0 for b in sc.model.berries) else None
                 h = str(e).split("the step size was ", 1)[1].split(",")[0]
+                touching = str(e).split("in contact when it stopped: ", 1)  # the first pair named (contact_hint)
                 print(f"seed {s}: stopped at the step limit with steps of {h}; the stiffest hinge's m l²/c: "
-                      f"{f'{tau[0]:.3g} s ({tau[1]})' if tau else 'none'}")
+                      f"{f'{tau[0]:.3g} s ({tau[1]})' if tau else 'none'}; "
+                      f"{'in contact: ' + touching[1].split('); ')[0] + ')' if len(touching) > 1 else 'no pair touching'}")
             continue
         except Exception:
             seen["DEFECT: another exception"] += 1
@@ -130,6 +134,10 @@ def main(first: int = 150, count: int = 300) -> None:
                 seen["  of them, warned that the energy ledger misses"] += 1
                 warned.append(sc.solver.rtol)
                 print(f"seed {s}: the ledger misses by {ledger_assessment(run)[0]:.2g} at rtol {sc.solver.rtol:.2g}")
+            deep = overlap_warning(run)
+            if deep:  # pressed beyond the depth any contact law holds at: the run says so
+                seen["  of them, warned of a pair pressed beyond 0.2 of its radius"] += 1
+                print(f"seed {s}: {deep.split(', where')[0]}")
         else:
             seen["DEFECT: non-finite samples"] += 1
             print(f"seed {s}: non-finite samples: {doc}")

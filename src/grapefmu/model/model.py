@@ -74,7 +74,8 @@ MAX_SWING = math.radians(80.0)
 ANGLE = Bound(-math.pi, math.pi, unit="rad")
 ANGULAR_VELOCITY = Bound(-1e3, 1e3, unit="rad/s")
 #: the deepest overlap a start (and a planar scene file's hanging rest) may hold, as a fraction of the smaller radius:
-#: a contact law means nothing far beyond it, and such a start flings the berries apart with energy nobody gave them
+#: a contact law means nothing far beyond it, and such a start flings the berries apart with energy nobody gave them;
+#: a run whose samples pass it is warned (results/trust.py)
 MAX_OVERLAP_FRACTION = 0.2
 
 

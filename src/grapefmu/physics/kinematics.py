@@ -315,14 +315,18 @@ def overlaps(y, M) -> np.ndarray:
     return out
 
 
+def overlap_bounds(M, fraction: float) -> np.ndarray:
+    """`fraction` of each candidate pair's smaller radius (a berry's own against an obstacle), m (P,)."""
+    i, j, nb, r = M.pair["i"], M.pair["j"], M.berry.shape[0], M.berry["radius"]
+    return fraction * np.where(j < nb, np.minimum(r[i], r[np.minimum(j, nb - 1)]), r[i])
+
+
 def deepest_overlap(y, M, fraction: float) -> tuple[int, float, float] | None:
     """(pair, δ, bound) of the pair at y whose overlap passes `fraction` of its smaller radius (a berry's own against
     an obstacle) by the most, or None."""
-    i, j, nb = M.pair["i"], M.pair["j"], M.berry.shape[0]
-    if i.size == 0:
+    if M.pair.shape[0] == 0:
         return None
-    r = M.berry["radius"]
-    bound = fraction * np.where(j < nb, np.minimum(r[i], r[np.minimum(j, nb - 1)]), r[i])
+    bound = overlap_bounds(M, fraction)
     delta = overlaps(y, M)
     p = int(np.argmax(delta - bound))
     return (p, float(delta[p]), float(bound[p])) if delta[p] > bound[p] else None

@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..model.contact import Law
+from ..model.model import MAX_OVERLAP_FRACTION
+from ..physics.kinematics import overlap_bounds
 
 if TYPE_CHECKING:
     from .run import Run
@@ -112,8 +114,31 @@ def ledger_warning(run: Run) -> str | None:
             f"{rtol:.0e}, within [1e-6, 1e-2]): energy is not conserved to the accuracy asked for")
 
 
+def overlap_warning(run: Run) -> str | None:
+    """A pair pressed deeper than MAX_OVERLAP_FRACTION of the smaller radius (a berry's own against an obstacle) at a
+    sample, the deepest such: the contact laws hold for shallow contact, a start that deep is refused, and a run gets
+    there when its rachis drags berries into an obstacle or an impact is far too fast for its law."""
+    pen = run.penetration
+    if not pen.size:
+        return None
+    m = run.scene.model
+    bound = overlap_bounds(m.arrays, MAX_OVERLAP_FRACTION)
+    excess = pen - bound
+    k, p = np.unravel_index(int(np.argmax(excess)), excess.shape)
+    if not excess[k, p] > 0.0:
+        return None
+    pr, nb = m.pairs[p], m.n_berries
+    who = (f"berry {m.berries[pr.i].name!r} was {pen[k, p] * 1e3:.3g} mm inside obstacle {m.obstacles[pr.j - nb].name!r}"
+           if pr.j >= nb else
+           f"berries {m.berries[pr.i].name!r} and {m.berries[pr.j].name!r} overlapped by {pen[k, p] * 1e3:.3g} mm")
+    return (f"{who} at t = {run.t[k]:.6g} s, beyond {bound[p] * 1e3:.3g} mm ({MAX_OVERLAP_FRACTION:g} of the "
+            f"{'berry' if pr.j >= nb else 'smaller'} radius), where no contact law holds: its contact force and "
+            "what follows from it are not physical (a rachis that drags berries into an obstacle, or an impact far "
+            "too fast for the law)")
+
+
 def warnings(run: Run) -> list[str]:
     """Every warning about `run`, one line each: the checks above, then those the run was given
     (run.stats["warnings"], e.g. the paper method's comparison with event location)."""
-    out = [w for w in (fixed_step_warning(run), ledger_warning(run)) if w]
+    out = [w for w in (fixed_step_warning(run), ledger_warning(run), overlap_warning(run)) if w]
     return out + [str(w) for w in run.stats.get("warnings", ())]
