@@ -158,3 +158,33 @@ def test_a_bad_parameter_is_one_line_naming_it(tmp_path, value, words):
     assert r.returncode == 2, r.stderr
     assert words in r.stderr and "Traceback" not in r.stderr
     assert [line for line in r.stderr.splitlines() if line.startswith("grapefmu_ros: error:")]
+
+
+def test_diagnostics_warn_of_berries_pressed_past_any_contact_law(ros, tmp_path):
+    """A controller that drives the gripper down through the crate floor drags the berries into it: /diagnostics
+    turns WARN and names the berry, its depth and the bound, 0.2 of its radius (results/trust.py, the rule a run's
+    warnings use), where before it said "ok" throughout. Hanging, it says "ok"."""
+    from grapefmu.scenefile.toml_out import dumps
+
+    from .conftest import dual
+    floor = {"name": "floor", "point": [0.0, 0.0, -0.05], "normal": [0.0, 0.0, 1.0], "law": "hunt-crossley",
+             "stiffness": 2e4, "restitution": 0.3}
+    path = tmp_path / "floor.toml"
+    path.write_text(dumps(dual(angles=(0.0, 0.0), obstacles=[floor])))
+    n = node(mode="lockstep", scene=str(path))
+    said = []
+    emit = n.emit
+    n.emit = lambda topic, m, ns: (said.append(m.status[0]) if topic == "/diagnostics" else None, emit(topic, m, ns))
+    try:
+        n.on_diagnostics()
+        for k in range(13):  # 20 m/s² down for 0.12 s: 0.14 m down, the berries' bottoms 43.5 mm below the hinges
+            n.on_accel(serialize(msgs.accel(to_ns(0.01 * k), (0.0, 0.0, -20.0, 0.0, 0.0, 0.0))[1]))
+        n.on_diagnostics()
+        depth = float(n.solver.observe().penetration[0].max())
+    finally:
+        n.close()
+        n.destroy_node()
+    assert said[0].level == 0 and said[0].message == "ok"
+    assert said[1].level == 1 and "inside obstacle 'floor'" in said[1].message, said[1].message
+    assert f"was {depth * 1e3:.3g} mm inside" in said[1].message and "beyond 2.7 mm (0.2 of the berry radius)" in \
+        said[1].message and depth > 0.05

@@ -34,6 +34,7 @@ from grapefmu.solver.warmup import notice
 from grapefmu.recording import messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
+from grapefmu.results.trust import deepest_overlap, overlap_words
 
 from .interfaces import message_class
 from .qos import INPUT_QOS, STATE_QOS, TOPIC_QOS
@@ -448,8 +449,10 @@ class SimulatorNode(Node):
         wall_prev, cpu_prev = self._diag_last[0], self._diag_last[1]
         t = self.solver.t
         self._diag_last = (now, cpu, t)
-        summary = dict(zip(msgs.SUMMARY_FIELDS[1:], msgs.summary_table(self.solver.snapshot())[0, 1:].tolist()))
+        snap = self.solver.snapshot()
+        summary = dict(zip(msgs.SUMMARY_FIELDS[1:], msgs.summary_table(snap)[0, 1:].tolist()))
         detach, bruising = bool(summary["detachment_risk"]), int(summary["bruising_impacts"])
+        deep = deepest_overlap(self.scene.model, snap.observation.penetration)  # pressed past any contact law now
         values = {
             "sim_time_s": f"{t:.6f}", "real_time_factor": f"{(t - sim_prev) / max(now - wall_prev, 1e-9):.4f}",
             "cpu_percent": f"{100 * (cpu - cpu_prev) / max(now - wall_prev, 1e-9):.1f}", "overruns": self.overruns,
@@ -461,10 +464,11 @@ class SimulatorNode(Node):
             **({f"tick_cost_ms_{k}": f"{1e3 * v:.3f}" for k, v in
                 zip(("p50", "p99", "max"), np.percentile(self.tick_costs, [50, 99, 100]))} if self.tick_costs else {}),
         }
-        warn = detach or bruising or self.rejected or self.failures
+        warn = detach or bruising or self.rejected or self.failures or deep
         level = 2 if self.failures else (1 if warn else 0)
-        msg = "detachment risk" if detach else ("bruising impacts" if bruising else
-                                                ("inputs rejected" if self.rejected else "ok"))
+        msg = ("steps refused (the log says why)" if self.failures else
+               overlap_words(self.scene.model, *deep[1:], t) if deep else "detachment risk" if detach else
+               "bruising impacts" if bruising else "inputs rejected" if self.rejected else "ok")
         self.emit(*msgs.diagnostics(self._stamp(t), level, msg, values), self._stamp(t))
 
     def close(self):

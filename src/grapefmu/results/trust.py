@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..model.contact import Law
-from ..model.model import MAX_OVERLAP_FRACTION
+from ..model.model import MAX_OVERLAP_FRACTION, Model
 from ..physics.kinematics import overlap_bounds
 
 if TYPE_CHECKING:
@@ -114,27 +114,35 @@ def ledger_warning(run: Run) -> str | None:
             f"{rtol:.0e}, within [1e-6, 1e-2]): energy is not conserved to the accuracy asked for")
 
 
-def overlap_warning(run: Run) -> str | None:
-    """A pair pressed deeper than MAX_OVERLAP_FRACTION of the smaller radius (a berry's own against an obstacle) at a
-    sample, the deepest such: the contact laws hold for shallow contact, a start that deep is refused, and a run gets
-    there when its rachis drags berries into an obstacle or an impact is far too fast for its law."""
-    pen = run.penetration
-    if not pen.size:
+def deepest_overlap(model: Model, penetration: np.ndarray) -> tuple[int, int, float, float] | None:
+    """(sample, pair, δ, bound) of the pair pressed deepest beyond its bound, MAX_OVERLAP_FRACTION of the smaller
+    radius (a berry's own against an obstacle), in penetration (S, P), m; None when none is. The contact laws hold
+    for shallow contact and a start that deep is refused; a run gets there when its rachis drags berries into an
+    obstacle or an impact is far too fast for its law."""
+    if not penetration.size:
         return None
-    m = run.scene.model
-    bound = overlap_bounds(m.arrays, MAX_OVERLAP_FRACTION)
-    excess = pen - bound
+    bound = overlap_bounds(model.arrays, MAX_OVERLAP_FRACTION)
+    excess = penetration - bound
     k, p = np.unravel_index(int(np.argmax(excess)), excess.shape)
-    if not excess[k, p] > 0.0:
-        return None
-    pr, nb = m.pairs[p], m.n_berries
-    who = (f"berry {m.berries[pr.i].name!r} was {pen[k, p] * 1e3:.3g} mm inside obstacle {m.obstacles[pr.j - nb].name!r}"
-           if pr.j >= nb else
-           f"berries {m.berries[pr.i].name!r} and {m.berries[pr.j].name!r} overlapped by {pen[k, p] * 1e3:.3g} mm")
-    return (f"{who} at t = {run.t[k]:.6g} s, beyond {bound[p] * 1e3:.3g} mm ({MAX_OVERLAP_FRACTION:g} of the "
+    return (int(k), int(p), float(penetration[k, p]), float(bound[p])) if excess[k, p] > 0.0 else None
+
+
+def overlap_words(model: Model, p: int, delta: float, bound: float, t: float) -> str:
+    """What deepest_overlap found, for a run's warning and the ROS node's diagnostics."""
+    pr, nb = model.pairs[p], model.n_berries
+    who = (f"berry {model.berries[pr.i].name!r} was {delta * 1e3:.3g} mm inside obstacle "
+           f"{model.obstacles[pr.j - nb].name!r}" if pr.j >= nb else
+           f"berries {model.berries[pr.i].name!r} and {model.berries[pr.j].name!r} overlapped by {delta * 1e3:.3g} mm")
+    return (f"{who} at t = {t:.6g} s, beyond {bound * 1e3:.3g} mm ({MAX_OVERLAP_FRACTION:g} of the "
             f"{'berry' if pr.j >= nb else 'smaller'} radius), where no contact law holds: its contact force and "
             "what follows from it are not physical (a rachis that drags berries into an obstacle, or an impact far "
             "too fast for the law)")
+
+
+def overlap_warning(run: Run) -> str | None:
+    """The deepest overlap of the run's samples beyond its bound (deepest_overlap), or None."""
+    hit = deepest_overlap(run.scene.model, run.penetration)
+    return None if hit is None else overlap_words(run.scene.model, hit[1], hit[2], hit[3], float(run.t[hit[0]]))
 
 
 def warnings(run: Run) -> list[str]:
