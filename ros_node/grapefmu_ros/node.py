@@ -34,7 +34,7 @@ from grapefmu.solver.warmup import notice
 from grapefmu.recording import messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
-from grapefmu.results.trust import deepest_overlap, overlap_words
+from grapefmu.results.trust import overlap_words, pressed_too_deep
 
 from .interfaces import message_class
 from .qos import INPUT_QOS, STATE_QOS, TOPIC_QOS
@@ -452,7 +452,7 @@ class SimulatorNode(Node):
         snap = self.solver.snapshot()
         summary = dict(zip(msgs.SUMMARY_FIELDS[1:], msgs.summary_table(snap)[0, 1:].tolist()))
         detach, bruising = bool(summary["detachment_risk"]), int(summary["bruising_impacts"])
-        deep = deepest_overlap(self.scene.model, snap.observation.penetration)  # pressed past any contact law now
+        deep = pressed_too_deep(self.scene.model, snap.observation.penetration)  # past any contact law now
         values = {
             "sim_time_s": f"{t:.6f}", "real_time_factor": f"{(t - sim_prev) / max(now - wall_prev, 1e-9):.4f}",
             "cpu_percent": f"{100 * (cpu - cpu_prev) / max(now - wall_prev, 1e-9):.1f}", "overruns": self.overruns,

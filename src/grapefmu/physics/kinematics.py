@@ -321,15 +321,15 @@ def overlap_bounds(M, fraction: float) -> np.ndarray:
     return fraction * np.where(j < nb, np.minimum(r[i], r[np.minimum(j, nb - 1)]), r[i])
 
 
-def deepest_overlap(y, M, fraction: float) -> tuple[int, float, float] | None:
-    """(pair, δ, bound) of the pair at y whose overlap passes `fraction` of its smaller radius (a berry's own against
-    an obstacle) by the most, or None."""
-    if M.pair.shape[0] == 0:
+def deepest_overlap(delta: np.ndarray, M, fraction: float) -> tuple[int, int, float, float] | None:
+    """(row, pair, δ, bound) of the overlap in delta (rows of every pair's δ, m: states or samples) that passes
+    `fraction` of its pair's smaller radius (a berry's own against an obstacle) by the most, or None."""
+    if not delta.size:
         return None
     bound = overlap_bounds(M, fraction)
-    delta = overlaps(y, M)
-    p = int(np.argmax(delta - bound))
-    return (p, float(delta[p]), float(bound[p])) if delta[p] > bound[p] else None
+    excess = delta - bound
+    k, p = np.unravel_index(int(np.argmax(excess)), excess.shape)
+    return (int(k), int(p), float(delta[k, p]), float(bound[p])) if excess[k, p] > 0.0 else None
 
 
 @jit

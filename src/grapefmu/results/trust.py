@@ -14,7 +14,7 @@ import numpy as np
 
 from ..model.contact import Law
 from ..model.model import MAX_OVERLAP_FRACTION, Model
-from ..physics.kinematics import overlap_bounds
+from ..physics.kinematics import deepest_overlap
 
 if TYPE_CHECKING:
     from .run import Run
@@ -114,21 +114,16 @@ def ledger_warning(run: Run) -> str | None:
             f"{rtol:.0e}, within [1e-6, 1e-2]): energy is not conserved to the accuracy asked for")
 
 
-def deepest_overlap(model: Model, penetration: np.ndarray) -> tuple[int, int, float, float] | None:
-    """(sample, pair, δ, bound) of the pair pressed deepest beyond its bound, MAX_OVERLAP_FRACTION of the smaller
-    radius (a berry's own against an obstacle), in penetration (S, P), m; None when none is. The contact laws hold
-    for shallow contact and a start that deep is refused; a run gets there when its rachis drags berries into an
-    obstacle or an impact is far too fast for its law."""
-    if not penetration.size:
-        return None
-    bound = overlap_bounds(model.arrays, MAX_OVERLAP_FRACTION)
-    excess = penetration - bound
-    k, p = np.unravel_index(int(np.argmax(excess)), excess.shape)
-    return (int(k), int(p), float(penetration[k, p]), float(bound[p])) if excess[k, p] > 0.0 else None
+def pressed_too_deep(model: Model, penetration: np.ndarray) -> tuple[int, int, float, float] | None:
+    """(sample, pair, δ, bound) of the pair pressed deepest beyond MAX_OVERLAP_FRACTION of the smaller radius (a
+    berry's own against an obstacle) in penetration (S, P), m, or None: the contact laws hold for shallow contact and
+    a start that deep is refused; a run gets there when its rachis drags berries into an obstacle or an impact is
+    far too fast for its law."""
+    return deepest_overlap(penetration, model.arrays, MAX_OVERLAP_FRACTION)
 
 
 def overlap_words(model: Model, p: int, delta: float, bound: float, t: float) -> str:
-    """What deepest_overlap found, for a run's warning and the ROS node's diagnostics."""
+    """What pressed_too_deep found, for a run's warning and the ROS node's diagnostics."""
     pr, nb = model.pairs[p], model.n_berries
     who = (f"berry {model.berries[pr.i].name!r} was {delta * 1e3:.3g} mm inside obstacle "
            f"{model.obstacles[pr.j - nb].name!r}" if pr.j >= nb else
@@ -140,8 +135,8 @@ def overlap_words(model: Model, p: int, delta: float, bound: float, t: float) ->
 
 
 def overlap_warning(run: Run) -> str | None:
-    """The deepest overlap of the run's samples beyond its bound (deepest_overlap), or None."""
-    hit = deepest_overlap(run.scene.model, run.penetration)
+    """The deepest overlap of the run's samples beyond its bound (pressed_too_deep), or None."""
+    hit = pressed_too_deep(run.scene.model, run.penetration)
     return None if hit is None else overlap_words(run.scene.model, hit[1], hit[2], hit[3], float(run.t[hit[0]]))
 
 

@@ -490,20 +490,21 @@ def _thresholds(raw: Any) -> Thresholds:
 def _check_overlap(model: Model, angles: list[float]) -> None:
     """Reject starts, and hanging rest states, that overlap far beyond what a contact law can mean (a hinge_x or an
     angle mistyped); a start is checked again, on the model's keys, wherever a scene is run (Solver)."""
-    from ..physics.kinematics import deepest_overlap
+    from ..physics.kinematics import deepest_overlap, overlaps
 
     nd = model.n_dof
     states = [("initial", np.r_[angles, np.zeros(nd)])]
     if model.planar:
         states.append(("hanging rest", np.zeros(2 * nd)))
     for label, y in states:
-        hit = deepest_overlap(y, model.arrays, MAX_OVERLAP_FRACTION)
+        hit = deepest_overlap(overlaps(y, model.arrays)[None], model.arrays, MAX_OVERLAP_FRACTION)
         if hit is None:
             continue
-        pr, nb = model.pairs[hit[0]], model.n_berries
+        _, p, delta, limit = hit
+        pr, nb = model.pairs[p], model.n_berries
         if pr.j >= nb:
             k = pr.j - nb
             key = f"obstacles[{k}].{OBSTACLE_SHAPE_KEYS[model.obstacles[k].kind][0]}"
         else:
             key = f"berries[{pr.j}].hinge_x" if label == "hanging rest" else f"berries[{pr.j}].angle"
-        raise SceneError(key, model.overlap_words(*hit, label))
+        raise SceneError(key, model.overlap_words(p, delta, limit, label))

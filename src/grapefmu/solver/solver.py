@@ -157,13 +157,14 @@ class Solver:
         """A start in contact may overlap by at most MAX_OVERLAP_FRACTION of the smaller radius, however the scene was
         built: deeper, a contact law means nothing and the pair is flung apart with energy nobody gave it (a scene
         file says so on its own keys, scenefile.parse)."""
-        hit = deepest_overlap(self.state.physical.y, self.M, MAX_OVERLAP_FRACTION)
+        hit = deepest_overlap(overlaps(self.state.physical.y, self.M)[None], self.M, MAX_OVERLAP_FRACTION)
         if hit is None:
             return
+        _, p, delta, limit = hit
         m = self.model
-        pr, nb = m.pairs[hit[0]], m.n_berries
+        pr, nb = m.pairs[p], m.n_berries
         key = f"obstacles[{pr.j - nb}].point" if pr.j >= nb else f"angles[{m.dof[pr.j]}]"
-        raise SceneError(key, m.overlap_words(*hit, "initial"))
+        raise SceneError(key, m.overlap_words(p, delta, limit, "initial"))
 
     @functools.cached_property
     def _outputs(self) -> tuple[st.Recorder, tuple]:

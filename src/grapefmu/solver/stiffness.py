@@ -167,9 +167,9 @@ def contact_hint(model: Model, contacts: np.ndarray, delta: np.ndarray) -> str |
         if law.law == Law.KELVIN_VOIGT:
             k, c = law.stiffness, law.damping
         else:
-            d = max(float(delta[p]), 0.0)
+            d, v = max(float(delta[p]), 0.0), float(contacts["v_onset"][p])
             k = 1.5 * law.stiffness * math.sqrt(d)
-            c = law.damping * law.stiffness * d * math.sqrt(d) / float(contacts["v_onset"][p])
+            c = law.damping * law.stiffness * d * math.sqrt(d) / v if v > 0.0 else math.inf  # hertz: 0
             text += f"; at δ = {d:.3g} m, k = {k:.3g} N/m"
             if law.law == Law.HUNT_CROSSLEY:
                 text += f", c = {c:.3g} N·s/m"
