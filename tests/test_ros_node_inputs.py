@@ -185,6 +185,8 @@ def test_diagnostics_warn_of_berries_pressed_past_any_contact_law(ros, tmp_path)
         n.close()
         n.destroy_node()
     assert said[0].level == 0 and said[0].message == "ok"
+    deepest = [float(kv.value) for s in said for kv in s.values if kv.key == "deepest_overlap_of_radius"]
+    assert deepest[0] == 0.0 and deepest[1] == pytest.approx(depth / 0.0135, rel=1e-3)  # the berries' radius
     assert said[1].level == 1 and "inside obstacle 'floor'" in said[1].message, said[1].message
     assert f"was {depth * 1e3:.3g} mm inside" in said[1].message and "beyond 2.7 mm (0.2 of the berry radius)" in \
         said[1].message and depth > 0.05
