@@ -34,8 +34,7 @@ from grapefmu.solver.warmup import notice
 from grapefmu.recording import messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
-from grapefmu.physics.kinematics import overlap_bounds
-from grapefmu.results.trust import overlap_words, pressed_too_deep
+from grapefmu.results.trust import overlap_of_radius, overlap_words, pressed_too_deep
 
 from .interfaces import message_class
 from .qos import INPUT_QOS, STATE_QOS, TOPIC_QOS
@@ -135,7 +134,6 @@ class SimulatorNode(Node):
         self.rachis_frame = f"{self.prefix}rachis"
         #: a planar scene's rachis turns about its y axis only: this world direction (None: spherical berries only)
         self.plane_normal = m.plane_normal(self.scene.excitation)
-        self.radii = overlap_bounds(m.arrays, 1.0)  # each pair's smaller radius, m (diagnostics)
         if self.gripper_frame:
             self.create_subscription(message_class(msgs.topic_type("/tf")), "/tf", self.on_tf, INPUT_QOS, raw=True)
         self.create_service(Trigger, "reset", self.on_reset)
@@ -462,8 +460,7 @@ class SimulatorNode(Node):
             **({} if math.isnan(self.orientation_offset) else
                {"gripper_orientation_offset_rad": f"{self.orientation_offset:.6f}"}),
             "zeno_guard_activations": self.solver.stats["zeno_guard_activations"], "paused": self.paused,
-            # the deepest pair's overlap over its smaller radius (a berry's own against an obstacle) now
-            "deepest_overlap_of_radius": f"{(snap.observation.penetration[0] / self.radii).max(initial=0.0):.4f}",
+            "deepest_overlap_of_radius": f"{overlap_of_radius(self.scene.model, snap.observation.penetration):.4f}",
             "mode": self.mode,
             **({f"tick_cost_ms_{k}": f"{1e3 * v:.3f}" for k, v in
                 zip(("p50", "p99", "max"), np.percentile(self.tick_costs, [50, 99, 100]))} if self.tick_costs else {}),
