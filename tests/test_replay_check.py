@@ -3,6 +3,8 @@ to its last complete chunk, exit 0) from a corrupted one (a CRC, parse or decode
 the record, non-zero exit), and any deviation above the tolerance fails the check."""
 from __future__ import annotations
 
+import math
+
 import subprocess
 import sys
 from pathlib import Path
@@ -373,9 +375,10 @@ def test_a_recording_carries_the_csv_its_scene_names(tmp_path, monkeypatch, kind
     assert e.value.key == "excitation.file"
 
 
-def _real_time_copy(path, t_max: int, leave_out, wall: int = 1_796_000_000 * 10**9) -> None:
+def _real_time_copy(path, t_max: int, leave_out, wall: int = 1_796_000_000 * 10**9, back=(math.inf, 0)) -> None:
     """The shipped lockstep recording up to `t_max` ns, logged `wall` ns later (a real-time node's stamps: the wall
-    clock's, here 2026-11-30), without the sim_time messages `leave_out` picks out of their indices."""
+    clock's, here 2026-11-30), without the sim_time messages `leave_out` picks out of their indices; after simulated
+    time back[0] (ns), logged back[1] ns earlier again."""
     with open(Path(__file__).parents[1] / "recordings" / "gentle.mcap", "rb") as fh:
         reader = make_reader(fh)
         meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
@@ -387,7 +390,7 @@ def _real_time_copy(path, t_max: int, leave_out, wall: int = 1_796_000_000 * 10*
             w.add_metadata(name, data)
         for k, (typename, topic, t, data) in enumerate(msgs):
             if k not in lost:
-                w.write(topic, deserialize(data, typename), wall + t)
+                w.write(topic, deserialize(data, typename), wall + t - (back[1] if t > back[0] else 0))
 
 
 def test_a_real_time_recording_cut_between_an_intervals_two_messages_is_checked_up_to_the_interval_before(tmp_path):
@@ -419,3 +422,15 @@ def test_an_interval_without_its_sim_time_in_a_whole_recording_is_refused_by_its
     _real_time_copy(old, 200_000_000, lambda at: at, wall=0)
     r = check(old)
     assert r.ok and r.max_deviation == 0.0 and r.compared == 200
+
+
+def test_intervals_that_share_a_stamp_end_at_their_own_sim_times(tmp_path):
+    """A real-time node running ahead of its clock (real_time_factor > 1) restarts its stamps from the clock when it
+    resumes: they go back, and a stamp can end two intervals at two simulated times. Each interval's sim_time is
+    the one logged after its own rachis/accel_applied, as its other messages are. Before, one table keyed by stamp
+    kept the later: the intervals it shared were re-simulated to the later ends. Here: the shipped recording's first
+    0.8 s (its berries swing from 0.55 s on), its last 0.2 s logged at the 0.2 s before's stamps."""
+    path = tmp_path / "resumed.mcap"
+    _real_time_copy(path, 800_000_000, lambda at: [], back=(600_000_000, 200_000_000))
+    r = check(path)
+    assert r.ok and r.max_deviation == 0.0 and r.compared == 800

@@ -306,7 +306,7 @@ def _by_interval(rec: Recording, topic: str, applied: list, at: list[int]) -> tu
     """What the node wrote about interval k (its `rachis/accel_applied` is applied[k], at position at[k] in the
     file) on `topic`: the first such message after that accel_applied, before the next one, at the same stamp
     (stamps alone repeat after a lockstep reset). For twist_applied, the angular velocity set at the interval's
-    start; for joint_states, the state it reached. Also the stamp of a message that follows no interval (or None)."""
+    start; for joint_states, the state it reached; for sim_time, where it ended. Also the stamp of a message that follows no interval (or None)."""
     out, stray = {}, None
     for pos, (ns, m) in zip(rec.positions.get(topic, []), rec.topics.get(topic, [])):
         k = bisect.bisect_left(at, pos) - 1
@@ -377,23 +377,25 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         # may be an interval's (a reset before the clock moved), so it is left out of the intervals' ends
         start = [m.clock.sec == 0 and m.clock.nanosec == 0 for _, m in rec.topics.get("sim_time", [])]
         starts = [pos for pos, s in zip(rec.positions.get("sim_time", []), start) if s]
-        sim = {ns: to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec))
-               for (ns, m), s in zip(rec.topics.get("sim_time", []), start) if not s}
+        # found by position, as the interval's other messages: a real-time node's stamps go back when it resumes
+        # ahead of its clock (real_time_factor > 1), so a stamp may end two intervals at two simulated times
+        ends = {k: to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec))
+                for k, m in _by_interval(rec, "sim_time", applied, at)[0].items() if m.clock.sec or m.clock.nanosec}
         omega, stray = _by_interval(rec, "rachis/twist_applied", applied, at)
         if stray is not None:
             raise RecordingError(f"{path}: rachis/twist_applied logged at {_t(stray)} does not follow the "
                                  f"rachis/accel_applied of its interval")
         reached = _by_interval(rec, "joint_states", applied, at)[0]
         clocked = "sim_time" in rec.topics  # recordings before the node logged sim_time end an interval at its stamp
-        if clocked and rec.truncated and applied and applied[-1][0] not in sim:
+        if clocked and rec.truncated and applied and len(applied) - 1 not in ends:
             # cut between the last interval's accel_applied and its sim_time: where it ends is lost (in real time
             # its stamp is the wall clock's, not an end), so it is not re-simulated
             applied = applied[:-1]
         for k, (ns, m) in enumerate(applied):
-            if clocked and ns not in sim:
+            if clocked and k not in ends:
                 raise RecordingError(f"{path}: the interval whose rachis/accel_applied is logged at {_t(ns)} has no "
                                      f"sim_time at its stamp, so where it ends is not known")
-            t_end = seconds(sim[ns] if clocked else ns)
+            t_end = seconds(ends[k] if clocked else ns)
             restarted = bisect.bisect_left(starts, at[k]) > bisect.bisect_left(starts, at[k - 1]) if k else False
             if restarted or t_end < solver.t:  # the node was reset (older recordings: its time went back)
                 solver = Solver(scene, driven=driven)
