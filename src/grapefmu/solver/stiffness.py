@@ -164,16 +164,18 @@ def contact_hint(model: Model, contacts: np.ndarray, delta: np.ndarray) -> str |
         if law.law != Law.HERTZ:  # the only law without a damping coefficient
             text += f", damping {law.damping:.3g} {units['damping'].unit}"
         text += f"; m = {m:.3g} kg"
+        c = None  # Hertz: undamped
         if law.law == Law.KELVIN_VOIGT:
             k, c = law.stiffness, law.damping
         else:
-            d, v = max(float(delta[p]), 0.0), float(contacts["v_onset"][p])
+            d = max(float(delta[p]), 0.0)
             k = 1.5 * law.stiffness * math.sqrt(d)
-            c = law.damping * law.stiffness * d * math.sqrt(d) / v if v > 0.0 else math.inf  # hertz: 0
             text += f"; at δ = {d:.3g} m, k = {k:.3g} N/m"
             if law.law == Law.HUNT_CROSSLEY:
+                v = float(contacts["v_onset"][p])
+                c = law.damping * law.stiffness * d * math.sqrt(d) / v if v > 0.0 else math.inf
                 text += f", c = {c:.3g} N·s/m"
-        if law.law != Law.HERTZ:
+        if c is not None:
             text += f", m/c = {m / c if c > 0 else math.inf:.3g} s"
         text += f", √(m/k) = {math.sqrt(m / k) if k > 0 else math.inf:.3g} s"
         words.append(text + ")")
