@@ -11,7 +11,6 @@ import numpy as np
 import grapefmu
 from grapefmu.bench.scenes import bench_scenes, build
 from grapefmu.model.model import MAX_OVERLAP_FRACTION
-from grapefmu.physics.kinematics import overlap_bounds
 from grapefmu.scenefile import load_scene
 
 SHIPPED = Path(grapefmu.__file__).parent / "scenes"
@@ -22,7 +21,7 @@ def deepest(run) -> tuple[float, str]:
     m = run.scene.model
     if not len(m.pairs):
         return 0.0, "-"
-    q = (run.penetration / overlap_bounds(m.arrays, 1.0)).max(axis=0)
+    q = (run.penetration / m.contact_radius).max(axis=0)
     p = int(np.argmax(q))
     return float(q[p]), m.pair_name(p)
 

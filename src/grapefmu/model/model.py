@@ -343,6 +343,15 @@ class Model:
         return ModelArrays(berry, pair, coupling, obstacle, float(self.gravity), int(dof[-1]))
 
     @cached_property
+    def contact_radius(self) -> np.ndarray:
+        """(P,) m: each candidate pair's smaller radius (a berry's own against an obstacle), the scale its overlap is
+        judged on (MAX_OVERLAP_FRACTION)."""
+        r, nb = [b.radius for b in self.berries], len(self.berries)
+        out = np.array([min(r[p.i], r[p.j]) if p.j < nb else r[p.i] for p in self.pairs], dtype=float)
+        out.flags.writeable = False
+        return out
+
+    @cached_property
     def dof(self) -> np.ndarray:
         """(N + 1,): berry i's angles are q[dof[i]:dof[i + 1]]."""
         return np.r_[0, np.cumsum([b.ndof for b in self.berries])].astype(np.int64)

@@ -315,21 +315,14 @@ def overlaps(y, M) -> np.ndarray:
     return out
 
 
-def overlap_bounds(M, fraction: float) -> np.ndarray:
-    """`fraction` of each candidate pair's smaller radius (a berry's own against an obstacle), m (P,)."""
-    i, j, nb, r = M.pair["i"], M.pair["j"], M.berry.shape[0], M.berry["radius"]
-    return fraction * np.where(j < nb, np.minimum(r[i], r[np.minimum(j, nb - 1)]), r[i])
-
-
-def deepest_overlap(delta: np.ndarray, M, fraction: float) -> tuple[int, int, float, float] | None:
-    """(row, pair, δ, bound) of the overlap in delta (rows of every pair's δ, m: states or samples) that passes
-    `fraction` of its pair's smaller radius (a berry's own against an obstacle) by the most, or None."""
+def deepest_overlap(delta: np.ndarray, bound: np.ndarray) -> tuple[int, int, float, float] | None:
+    """(row, pair, δ, bound) of the overlap in delta (rows of every pair's δ, m: states or samples) that passes its
+    pair's bound (m, (P,): a fraction of Model.contact_radius) by the most, or None."""
     if not delta.size:
         return None
-    bound = overlap_bounds(M, fraction)
     excess = delta - bound
-    k, p = np.unravel_index(int(np.argmax(excess)), excess.shape)
-    return (int(k), int(p), float(delta[k, p]), float(bound[p])) if excess[k, p] > 0.0 else None
+    k, p = divmod(int(excess.argmax()), excess.shape[1])
+    return (k, p, float(delta[k, p]), float(bound[p])) if excess[k, p] > 0.0 else None
 
 
 @jit

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..model.contact import Law
 from ..model.model import MAX_OVERLAP_FRACTION, Model
-from ..physics.kinematics import deepest_overlap, overlap_bounds
+from ..physics.kinematics import deepest_overlap
 
 if TYPE_CHECKING:
     from .run import Run
@@ -119,13 +119,13 @@ def pressed_too_deep(model: Model, penetration: np.ndarray) -> tuple[int, int, f
     berry's own against an obstacle) in penetration (S, P), m, or None: the contact laws hold for shallow contact and
     a start that deep is refused; a run gets there when its rachis drags berries into an obstacle or an impact is
     far too fast for its law."""
-    return deepest_overlap(penetration, model.arrays, MAX_OVERLAP_FRACTION)
+    return deepest_overlap(penetration, MAX_OVERLAP_FRACTION * model.contact_radius)
 
 
 def overlap_of_radius(model: Model, penetration: np.ndarray) -> float:
     """The deepest overlap in penetration (S, P) over its pair's smaller radius (a berry's own against an obstacle);
     0 when no pair touches."""
-    return float((penetration / overlap_bounds(model.arrays, 1.0)).max(initial=0.0))
+    return float((penetration / model.contact_radius).max(initial=0.0))
 
 
 def overlap_words(model: Model, p: int, delta: float, bound: float, t: float) -> str:

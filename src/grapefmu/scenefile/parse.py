@@ -497,7 +497,7 @@ def _check_overlap(model: Model, angles: list[float]) -> None:
     if model.planar:
         states.append(("hanging rest", np.zeros(2 * nd)))
     for label, y in states:
-        hit = deepest_overlap(overlaps(y, model.arrays)[None], model.arrays, MAX_OVERLAP_FRACTION)
+        hit = deepest_overlap(overlaps(y, model.arrays)[None], MAX_OVERLAP_FRACTION * model.contact_radius)
         if hit is None:
             continue
         _, p, delta, limit = hit

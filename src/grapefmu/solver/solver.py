@@ -157,7 +157,8 @@ class Solver:
         """A start in contact may overlap by at most MAX_OVERLAP_FRACTION of the smaller radius, however the scene was
         built: deeper, a contact law means nothing and the pair is flung apart with energy nobody gave it (a scene
         file says so on its own keys, scenefile.parse)."""
-        hit = deepest_overlap(overlaps(self.state.physical.y, self.M)[None], self.M, MAX_OVERLAP_FRACTION)
+        hit = deepest_overlap(overlaps(self.state.physical.y, self.M)[None],
+                              MAX_OVERLAP_FRACTION * self.model.contact_radius)
         if hit is None:
             return
         _, p, delta, limit = hit
