@@ -3,6 +3,8 @@ FMUs driven in a process of their own (tests/fmu_boundaries.py)."""
 from __future__ import annotations
 
 import json
+import math
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -92,3 +94,27 @@ def test_contact_parameters_of_a_scene_without_contact_are_refused(results):
     """They acted on nothing and were accepted (contact_law 7 read back as 7)."""
     status, log = results["fmi2"]["no contact restitution"]
     assert status == ERROR and "no [contact] table" in log and "restitution = 0.5" in log
+
+
+def test_a_pair_pressed_past_any_contact_law_is_a_warning_with_the_step_taken(results):
+    """A host has no run warnings and no /diagnostics: doStep returns Warning, the step taken, with the message a run
+    and the ROS node give, as a pair gets pressed past 0.2 of its smaller radius, once per excursion. Here a contact
+    law of 1 N/m lets the raised berry swing 17 mm into the other, twice; the warnings come exactly at the steps whose
+    end the FMU's own penetration output puts past the bound after a step within it, and the run goes on to the end.
+    FMI 3 logs the same two warnings (fmpy's FMI 3 doStep does not return the status)."""
+    r = results["fmi2"]["deep"]
+    bound, steps = r["bound"], r["steps"]
+    assert all(st == 0 for st, *_ in steps) and r["t"] == pytest.approx(0.6)  # never refused
+    deeper = [k for k, s in enumerate(steps) if s[3] > bound and (k == 0 or steps[k - 1][3] <= bound)]
+    warned = [k for k, s in enumerate(steps) if s[1] == 1]
+    assert len(deeper) == 2 and warned == deeper, (deeper, warned)
+    assert all(s[1] == 0 and not s[2] for k, s in enumerate(steps) if k not in warned)
+    for k in warned:
+        t = (k + 1) * 1e-3
+        assert re.fullmatch(rf"step to t = {t:.9g} s taken, but berries 'left' and 'right' overlapped by "
+                            rf"{steps[k][3] * 1e3:.3g} mm at t = {t:.6g} s, beyond {bound * 1e3:.3g} mm \(0.2 of the "
+                            r"smaller radius\), where no contact law holds: .*", steps[k][2]), steps[k][2]
+    assert all(math.isfinite(s[4]) for s in steps)
+    r3 = results["fmi3"]["deep"]
+    assert [k for k, (st, m) in enumerate(r3["steps"]) if "where no contact law holds" in m] == warned
+    assert all(st == 0 for st, _ in r3["steps"]) and r3["time"] == pytest.approx(0.6)

@@ -17,10 +17,9 @@ from grapefmu.model.bounds import bound
 from grapefmu.model.model import SolverSettings
 from grapefmu.solver.warmup import notice
 
-from .core import FmuCore
+from .core import ERROR, OK, WARNING, FmuCore
 from .report import binaries, in_call, refuse
 
-OK, WARNING, DISCARD, ERROR, FATAL = range(5)  # fmi2Status and fmi3Status share these codes
 #: s: the largest start time's magnitude, a scene's longest run (solver.t_end): beyond it the time's resolution
 #: is too coarse for event location (at 1e300 s no step moves the time at all)
 MAX_START = bound(SolverSettings, "t_end").hi
@@ -205,14 +204,15 @@ class GrapeSlaveMixin:
             self.phase = "step"
 
     def _step(self, current_time, step_size) -> bool:
-        """Integrate the communication step; False (refused, reported, state unchanged) when it cannot."""
+        """Integrate the communication step; False (refused, reported, state unchanged) when it cannot. A warning
+        is reported with the step taken (doStep returns Warning)."""
         try:
-            refusal = self.core.step(current_time, step_size)
+            said = self.core.step(current_time, step_size)
         except Exception as e:  # noqa: BLE001 - nothing may reach pythonfmu; this is a bug, reported as Error
-            refusal = (ERROR, f"doStep failed: {type(e).__name__}: {e}")
-        if refusal:
-            self._refuse(refusal[1], refusal[0])
-        return not refusal
+            said = (ERROR, f"doStep failed: {type(e).__name__}: {e}")
+        if said:
+            self._refuse(said[1], said[0])
+        return not said or said[0] == WARNING
 
     # --- FMU state --------------------------------------------------------------------------------
     def _get_fmu_state(self):
