@@ -163,7 +163,10 @@ def test_a_bad_parameter_is_one_line_naming_it(tmp_path, value, words):
 def test_diagnostics_warn_of_berries_pressed_past_any_contact_law(ros, tmp_path):
     """A controller that drives the gripper down through the crate floor drags the berries into it: /diagnostics
     turns WARN and names the berry, its depth and the bound, 0.2 of its radius (results/trust.py, the rule a run's
-    warnings use), where before it said "ok" throughout. Hanging, it says "ok"."""
+    warnings use), where before it said "ok" throughout. Hanging, it says "ok". Lifted out again before the next
+    diagnostics, the berries were still that deep at the states published in between: WARN names the deepest, with
+    its time (diagnostics that judged the state when sent gave the next warning, "bruising impacts"); the next
+    diagnostics give that."""
     from grapefmu.scenefile.toml_out import dumps
 
     from .conftest import dual
@@ -181,6 +184,11 @@ def test_diagnostics_warn_of_berries_pressed_past_any_contact_law(ros, tmp_path)
             n.on_accel(serialize(msgs.accel(to_ns(0.01 * k), (0.0, 0.0, -20.0, 0.0, 0.0, 0.0))[1]))
         n.on_diagnostics()
         depth = float(n.solver.observe().penetration[0].max())
+        for k in range(13, 31):  # 60 m/s² up for 0.1 s, then held: 0.22 m up by 0.3 s, out of the floor
+            n.on_accel(serialize(msgs.accel(to_ns(0.01 * k), (0.0, 0.0, 60.0 if k < 23 else 0.0, 0.0, 0.0, 0.0))[1]))
+        out = float(n.solver.observe().penetration[0].max())
+        n.on_diagnostics()
+        n.on_diagnostics()
     finally:
         n.close()
         n.destroy_node()
@@ -190,3 +198,7 @@ def test_diagnostics_warn_of_berries_pressed_past_any_contact_law(ros, tmp_path)
     assert said[1].level == 1 and "inside obstacle 'floor'" in said[1].message, said[1].message
     assert f"was {depth * 1e3:.3g} mm inside" in said[1].message and "beyond 2.7 mm (0.2 of the berry radius)" in \
         said[1].message and depth > 0.05
+    assert out == 0.0 and said[2].level == 1 and "inside obstacle 'floor'" in said[2].message, said[2].message
+    when = float(said[2].message.split(" at t = ")[1].split(" s")[0])
+    assert 0.12 < when < 0.3, said[2].message  # while it was lifted, before the diagnostics
+    assert said[3].message == "bruising impacts"  # the next: the drop into the floor bruised them, nothing is deep

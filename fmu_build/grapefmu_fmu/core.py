@@ -312,8 +312,7 @@ class FmuCore:
         """The pair pressed past the depth any contact law holds at now (results/trust.py, as a run's warnings and the
         ROS node's diagnostics judge it), on the snapshot the outputs are then read from. Only a pair in contact can
         be (or one evaluated inline under step control): with none, no snapshot (0.4 µs instead of about 5)."""
-        mode, smooth = self._contacts
-        if not (np.count_nonzero(mode) or np.count_nonzero(smooth)):
+        if not self.solver.touching:
             return None
         self._snap = self.solver.snapshot()
         return pressed_too_deep(self.solver.model, self._snap.observation.penetration)
@@ -337,8 +336,6 @@ class FmuCore:
             self.plane_normal = None if n is None else tuple(float(c) for c in n)
             self.input_bounds = self._input_bounds()
         self.solver = solver
-        self._contacts = None if solver is None else (solver.state.physical.contacts["mode"],
-                                                      solver.state.physical.contacts["smooth"])
         self._views = {}
         if solver is not None:
             snap = solver.snapshot()

@@ -143,6 +143,7 @@ class SimulatorNode(Node):
         self.overruns = 0
         self.tick_costs = collections.deque(maxlen=1000)  # s: the last ticks' wall time (diagnostics' percentiles)
         self.failures = 0
+        self.deepest = None  # (pair, δ, bound, t) pressed deepest past its bound since the last diagnostics, across resets
         self.real_time_factor = gp("real_time_factor")
         self.add_post_set_parameters_callback(self._on_parameters_set)
         self._reset_sim()
@@ -228,6 +229,10 @@ class SimulatorNode(Node):
         ns = self._stamp(t)
         markers_due, tf_due = self._due("marker_rate_hz", t), self._due("tf_rate_hz", t)
         snap = self.solver.snapshot()
+        if self.solver.touching:  # the deepest pair since the last diagnostics, which say so (on_diagnostics)
+            hit = pressed_too_deep(self.scene.model, snap.observation.penetration)
+            if hit and (self.deepest is None or hit[2] - hit[3] > self.deepest[1] - self.deepest[2]):
+                self.deepest = (*hit[1:], t)
         summary = msgs.summary_table(snap)
         for topic, m in msgs.state_messages(self.scene.model, snap, 0, ns, summary, markers=markers_due, tf=tf_due,
                                             prefix=self.prefix):
@@ -452,7 +457,7 @@ class SimulatorNode(Node):
         snap = self.solver.snapshot()
         summary = dict(zip(msgs.SUMMARY_FIELDS[1:], msgs.summary_table(snap)[0, 1:].tolist()))
         detach, bruising = bool(summary["detachment_risk"]), int(summary["bruising_impacts"])
-        deep = pressed_too_deep(self.scene.model, snap.observation.penetration)  # past any contact law now
+        deep, self.deepest = self.deepest, None  # past any contact law at a published state since the last ones
         values = {
             "sim_time_s": f"{t:.6f}", "real_time_factor": f"{(t - sim_prev) / max(now - wall_prev, 1e-9):.4f}",
             "cpu_percent": f"{100 * (cpu - cpu_prev) / max(now - wall_prev, 1e-9):.1f}", "overruns": self.overruns,
@@ -468,7 +473,7 @@ class SimulatorNode(Node):
         warn = detach or bruising or self.rejected or self.failures or deep
         level = 2 if self.failures else (1 if warn else 0)
         msg = ("steps refused (the log says why)" if self.failures else
-               overlap_words(self.scene.model, *deep[1:], t) if deep else "detachment risk" if detach else
+               overlap_words(self.scene.model, *deep) if deep else "detachment risk" if detach else
                "bruising impacts" if bruising else "inputs rejected" if self.rejected else "ok")
         self.emit(*msgs.diagnostics(self._stamp(t), level, msg, values), self._stamp(t))
 
