@@ -149,10 +149,10 @@ def main(first: int = 150, count: int = 300) -> None:
 
 
 def converge(seed: int) -> None:
-    """Seed's scene again at rtol 1e-6, 1e-8 and 1e-10: whether a ledger that missed closes as the tolerance
+    """Seed's scene again at rtol 1e-6, 1e-8, 1e-10 and 1e-12: whether a ledger that missed closes as the tolerance
     tightens (the method converging), or does not (a defect)."""
     sc = scene_from_dict(draw(random.Random(seed)), Path.cwd())
-    for rtol in (sc.solver.rtol, 1e-6, 1e-8, 1e-10):
+    for rtol in (sc.solver.rtol, 1e-6, 1e-8, 1e-10, 1e-12):
         run = Solver(sc, rtol=rtol, atol=rtol * 1e-2).run()
         print(f"seed {seed}, rtol {rtol:.2g}: the ledger misses by {ledger_assessment(run)[0]:.2g}")
 
