@@ -200,5 +200,7 @@ def test_diagnostics_warn_of_berries_pressed_past_any_contact_law(ros, tmp_path)
         said[1].message and depth > 0.05
     assert out == 0.0 and said[2].level == 1 and "inside obstacle 'floor'" in said[2].message, said[2].message
     when = float(said[2].message.split(" at t = ")[1].split(" s")[0])
+    named = float(said[2].message.split(" was ")[1].split(" mm")[0]) * 1e-3
+    assert deepest[2] == pytest.approx(named / 0.0135, rel=3e-3) and deepest[3] == 0.0  # named to 3 digits
     assert 0.12 < when < 0.3, said[2].message  # while it was lifted, before the diagnostics
     assert said[3].message == "bruising impacts"  # the next: the drop into the floor bruised them, nothing is deep

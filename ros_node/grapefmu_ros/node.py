@@ -144,6 +144,7 @@ class SimulatorNode(Node):
         self.tick_costs = collections.deque(maxlen=1000)  # s: the last ticks' wall time (diagnostics' percentiles)
         self.failures = 0
         self.deepest = None  # (pair, δ, bound, t) pressed deepest past its bound since the last diagnostics, across resets
+        self.deepest_of_radius = 0.0  # the deepest overlap over its pair's radius since the last diagnostics
         self.real_time_factor = gp("real_time_factor")
         self.add_post_set_parameters_callback(self._on_parameters_set)
         self._reset_sim()
@@ -230,7 +231,9 @@ class SimulatorNode(Node):
         markers_due, tf_due = self._due("marker_rate_hz", t), self._due("tf_rate_hz", t)
         snap = self.solver.snapshot()
         if self.solver.touching:  # the deepest pair since the last diagnostics, which say so (on_diagnostics)
-            hit = pressed_too_deep(self.scene.model, snap.observation.penetration)
+            pen = snap.observation.penetration
+            self.deepest_of_radius = max(self.deepest_of_radius, overlap_of_radius(self.scene.model, pen))
+            hit = pressed_too_deep(self.scene.model, pen)
             if hit and (self.deepest is None or hit[2] - hit[3] > self.deepest[1] - self.deepest[2]):
                 self.deepest = (*hit[1:], t)
         summary = msgs.summary_table(snap)
@@ -458,6 +461,7 @@ class SimulatorNode(Node):
         summary = dict(zip(msgs.SUMMARY_FIELDS[1:], msgs.summary_table(snap)[0, 1:].tolist()))
         detach, bruising = bool(summary["detachment_risk"]), int(summary["bruising_impacts"])
         deep, self.deepest = self.deepest, None  # past any contact law at a published state since the last ones
+        of_radius, self.deepest_of_radius = self.deepest_of_radius, 0.0
         values = {
             "sim_time_s": f"{t:.6f}", "real_time_factor": f"{(t - sim_prev) / max(now - wall_prev, 1e-9):.4f}",
             "cpu_percent": f"{100 * (cpu - cpu_prev) / max(now - wall_prev, 1e-9):.1f}", "overruns": self.overruns,
@@ -465,7 +469,7 @@ class SimulatorNode(Node):
             **({} if math.isnan(self.orientation_offset) else
                {"gripper_orientation_offset_rad": f"{self.orientation_offset:.6f}"}),
             "zeno_guard_activations": self.solver.stats["zeno_guard_activations"], "paused": self.paused,
-            "deepest_overlap_of_radius": f"{overlap_of_radius(self.scene.model, snap.observation.penetration):.4f}",
+            "deepest_overlap_of_radius": f"{of_radius:.4f}",
             "mode": self.mode,
             **({f"tick_cost_ms_{k}": f"{1e3 * v:.3f}" for k, v in
                 zip(("p50", "p99", "max"), np.percentile(self.tick_costs, [50, 99, 100]))} if self.tick_costs else {}),
