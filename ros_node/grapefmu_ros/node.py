@@ -143,7 +143,7 @@ class SimulatorNode(Node):
         self.overruns = 0
         self.tick_costs = collections.deque(maxlen=1000)  # s: the last ticks' wall time (diagnostics' percentiles)
         self.failures = 0
-        self.deepest = None  # (pair, δ, bound, t) pressed deepest past its bound since the last diagnostics, across resets
+        self.deepest = None  # (pair, δ, bound, t) pressed deepest past its bound since the last diagnostics
         self.deepest_of_radius = 0.0  # the deepest overlap over its pair's radius since the last diagnostics
         self.real_time_factor = gp("real_time_factor")
         self.add_post_set_parameters_callback(self._on_parameters_set)

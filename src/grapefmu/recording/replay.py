@@ -305,8 +305,9 @@ def _settings(path: Path, rec: Recording):
 def _by_interval(rec: Recording, topic: str, applied: list, at: list[int]) -> tuple[dict[int, object], int | None]:
     """What the node wrote about interval k (its `rachis/accel_applied` is applied[k], at position at[k] in the
     file) on `topic`: the first such message after that accel_applied, before the next one, at the same stamp
-    (stamps alone repeat after a lockstep reset). For twist_applied, the angular velocity set at the interval's
-    start; for joint_states, the state it reached; for sim_time, where it ended. Also the stamp of a message that follows no interval (or None)."""
+    (stamps alone repeat after a lockstep reset, and go back when a real-time node resumes ahead of its clock). For
+    twist_applied, the angular velocity set at the interval's start; for joint_states, the state it reached; for
+    sim_time, where it ended. Also the stamp of a message that follows no interval (or None)."""
     out, stray = {}, None
     for pos, (ns, m) in zip(rec.positions.get(topic, []), rec.topics.get(topic, [])):
         k = bisect.bisect_left(at, pos) - 1
@@ -377,8 +378,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         # may be an interval's (a reset before the clock moved), so it is left out of the intervals' ends
         start = [m.clock.sec == 0 and m.clock.nanosec == 0 for _, m in rec.topics.get("sim_time", [])]
         starts = [pos for pos, s in zip(rec.positions.get("sim_time", []), start) if s]
-        # found by position, as the interval's other messages: a real-time node's stamps go back when it resumes
-        # ahead of its clock (real_time_factor > 1), so a stamp may end two intervals at two simulated times
+        # by position, as the interval's other messages: a stamp may end two intervals at two simulated times
         ends = {k: to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec))
                 for k, m in _by_interval(rec, "sim_time", applied, at)[0].items() if m.clock.sec or m.clock.nanosec}
         omega, stray = _by_interval(rec, "rachis/twist_applied", applied, at)
