@@ -17,7 +17,7 @@ from grapefmu.model.bounds import bound
 from grapefmu.model.model import SolverSettings
 from grapefmu.solver.warmup import notice
 
-from .core import ERROR, OK, WARNING, FmuCore
+from .core import ERROR, OK, FmuCore
 from .report import binaries, in_call, refuse
 
 #: s: the largest start time's magnitude, a scene's longest run (solver.t_end): beyond it the time's resolution
@@ -203,16 +203,15 @@ class GrapeSlaveMixin:
         else:
             self.phase = "step"
 
-    def _step(self, current_time, step_size) -> bool:
-        """Integrate the communication step; False (refused, reported, state unchanged) when it cannot. A warning
-        is reported with the step taken (doStep returns Warning)."""
+    def _step(self, current_time, step_size) -> None:
+        """Integrate the communication step. What the core says goes to the binary, which makes doStep return it:
+        Error or Discard with the state unchanged, Warning with the step taken (do_step itself always returns True)."""
         try:
             said = self.core.step(current_time, step_size)
         except Exception as e:  # noqa: BLE001 - nothing may reach pythonfmu; this is a bug, reported as Error
             said = (ERROR, f"doStep failed: {type(e).__name__}: {e}")
         if said:
             self._refuse(said[1], said[0])
-        return not said or said[0] == WARNING
 
     # --- FMU state --------------------------------------------------------------------------------
     def _get_fmu_state(self):

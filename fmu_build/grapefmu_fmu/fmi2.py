@@ -26,4 +26,4 @@ class GrapeFmi2Slave(GrapeSlaveMixin, Fmi2Slave):
 
     def do_step(self, current_time, step_size):
         self._step(current_time, step_size)
-        return True  # a refusal already set the call's status (Error or Discard)
+        return True  # a refusal or a warning already set the call's status (Error, Discard or Warning)

@@ -48,4 +48,4 @@ class GrapeFmi3Slave(GrapeSlaveMixin, Fmi3Slave):
 
     def do_step(self, current_time, step_size):
         self._step(current_time, step_size)
-        return Fmi3StepResult()  # a refusal already set the call's status (Error or Discard)
+        return Fmi3StepResult()  # a refusal or a warning already set the call's status (Error, Discard or Warning)
