@@ -9,6 +9,7 @@ SIGNAL.csv: time and the inputs held from that row to the next, in the order of 
     python -m tests.fmu_driver named FMU SIGNAL.csv STOP DT NAME,NAME,... [NAME=VALUE ...]   (outputs after each step)
     python -m tests.fmu_driver cosim FMU SIGNAL.csv STOP DT
     python -m tests.fmu_driver ecos FMU SIGNAL.csv STOP DT     (needs LD_LIBRARY_PATH=<venv>/lib for tbb)
+    python -m tests.fmu_driver cosim-named|ecos-named FMU SIGNAL.csv STOP DT NAME,NAME,... [NAME=VALUE ...]
     python -m tests.fmu_driver replay FMU SIGNAL.csv
     python -m tests.fmu_driver two FMU SIGNAL.csv
     python -m tests.fmu_driver bad FMU
@@ -192,21 +193,49 @@ def run_cosim(path, rows, stop, dt):
     return {"a": outs_a, "b": outs_b}
 
 
-def run_ecos(path, rows, stop, dt):
-    """ecospy (Ecos co-simulation engine), a third importer none of us wrote."""
+def run_ecos(path, rows, stop, dt, names=OUTPUTS, params=None):
+    """ecospy (Ecos co-simulation engine), a third importer none of us wrote: the named Real outputs after every
+    step (parameters set before init)."""
     from ecospy import EcosSimulation, EcosSimulationStructure
     ss = EcosSimulationStructure()
     ss.add_model("a", path)
     sim = EcosSimulation(structure=ss, step_size=dt)
+    for k, x in (params or {}).items():
+        sim.set_real(f"a::{k}", x)
     sim.init()
     out = []
     for k in range(round(stop / dt)):
         for name, x in zip(INPUTS, held(rows, k * dt)):
             sim.set_real(f"a::{name}", x)
         sim.step()
-        out.append([(k + 1) * dt] + [sim.get_real(f"a::{n}") for n in OUTPUTS])
+        out.append([(k + 1) * dt] + [sim.get_real(f"a::{n}") for n in names])
     sim.terminate()
     return {"a": out}
+
+
+def run_cosim_named(path, rows, stop, dt, names, params):
+    """libcosimpy, one instance with its parameters' initial values: the named Real outputs after every step, and
+    whether each step succeeded."""
+    from fmpy import read_model_description
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimManipulator import CosimManipulator
+    from libcosimpy.CosimObserver import CosimObserver
+    from libcosimpy.CosimSlave import CosimLocalSlave
+    vr = {v.name: v.valueReference for v in read_model_description(path).modelVariables}
+    ex = CosimExecution.from_step_size(step_size=int(round(dt * 1e9)))
+    a = ex.add_local_slave(CosimLocalSlave(fmu_path=path, instance_name="a"))
+    for k, x in params.items():
+        ex.real_initial_value(a, vr[k], x)
+    manip = CosimManipulator.create_override()
+    ex.add_manipulator(manip)
+    obs = CosimObserver.create_last_value()
+    ex.add_observer(obs)
+    out, done = [], []
+    for k in range(round(stop / dt)):
+        manip.slave_real_values(a, [vr[n] for n in INPUTS], held(rows, k * dt))
+        done.append(bool(ex.step()))
+        out.append([(k + 1) * dt] + list(obs.last_real_values(a, [vr[n] for n in names])))
+    return {"a": out, "done": done}
 
 
 def replay(path, rows):
@@ -307,6 +336,10 @@ def main(argv):
             out = run_cosim(path, rows, float(argv[3]), float(argv[4]))
         elif cmd == "ecos":
             out = run_ecos(path, rows, float(argv[3]), float(argv[4]))
+        elif cmd in ("cosim-named", "ecos-named"):
+            params = {k: float(v) for k, v in (p.split("=") for p in argv[6:])}
+            run = run_cosim_named if cmd == "cosim-named" else run_ecos
+            out = run(path, rows, float(argv[3]), float(argv[4]), argv[5].split(","), params)
         elif cmd == "replay":
             out = replay(path, rows)
         else:

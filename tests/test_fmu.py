@@ -232,6 +232,23 @@ def test_ecospy_matches(fmus, reference):
     np.testing.assert_allclose(a[:, 1:3], reference.angles[1:], atol=1e-6)
 
 
+def test_libcosimpy_and_ecospy_take_the_fmus_warning_as_a_step_done(fmus):
+    """doStep's Warning (a pair pressed past any contact law, docs/fmu.md) is a step done for every importer: on a
+    1 N/m law the raised berry swings into the other past the bound, and libcosimpy and ecospy step on to the end,
+    their outputs after every step those fmpy reads (which tests/test_fmu_boundaries.py checks warns)."""
+    import os
+    pytest.importorskip("libcosimpy")
+    args = (fmus / "default2.fmu", fmus / "signal.csv", 0.6, 1e-3, "penetration_left_right,angle_left",
+            "contact_stiffness=1.0", "initial_angle_right=0.8")
+    ref = np.array(drive("named", *args[:5], *args[5:])["rows"])
+    cosim = drive("cosim-named", *args)
+    ecos = drive("ecos-named", *args, env={**os.environ, "LD_LIBRARY_PATH": str(Path(sys.prefix) / "lib")})
+    assert ref[:, 1].max() > 0.2 * 0.0135 and len(ref) == 600  # past the bound: the FMU warned
+    assert all(cosim["done"]) and len(cosim["done"]) == 600
+    np.testing.assert_allclose(np.array(cosim["a"]), ref, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.array(ecos["a"]), ref, rtol=0, atol=1e-12)
+
+
 def test_build_rejects_a_bad_scene(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text('[[berries]]\nname="a"\nmass=-1\nradius=0.01\ntwig_length=0.03\nhinge_x=0.0\n')
