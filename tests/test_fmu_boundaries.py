@@ -99,8 +99,9 @@ def test_contact_parameters_of_a_scene_without_contact_are_refused(results):
 def test_a_pair_pressed_past_any_contact_law_is_a_warning_with_the_step_taken(results):
     """A host has no run warnings and no /diagnostics: doStep returns Warning, the step taken, with the message a run
     and the ROS node give, as a pair gets pressed past 0.2 of its smaller radius, once per excursion. Here a contact
-    law of 1 N/m lets the raised berry swing 17 mm into the other, twice; the warnings come exactly at the steps whose
-    end the FMU's own penetration output puts past the bound after a step within it, and the run goes on to the end.
+    law of 1 N/m lets the raised berry swing far past the bound into the other, twice; the warnings come exactly at
+    the steps whose end the FMU's own penetration output puts past the bound after a step within it, and the run
+    goes on to the end.
     FMI 3 logs the same two warnings (fmpy's FMI 3 doStep does not return the status)."""
     r = results["fmi2"]["deep"]
     bound, steps = r["bound"], r["steps"]

@@ -149,7 +149,7 @@ class Solver:
                                   float(t_start), np.uint64(self._fingerprint()), s.zeno_max_events)
         # the state's arrays are views on _memory, so that a step's backup and rollback are one copy each
         self.state, self._memory, self._backup = ses.views(self._session)
-        self._pushing = (self.state.physical.contacts["mode"], self.state.physical.contacts["smooth"])  # touching
+        self._contact_flags = (self.state.physical.contacts["mode"], self.state.physical.contacts["smooth"])  # touching
         if self.state.physical.contacts["mode"].any():
             self._refuse_deep_start()
         self._snapshot: catalogue.Snapshot | None = None  # made by the first snapshot()
@@ -212,7 +212,7 @@ class Solver:
     def touching(self) -> bool:
         """Whether any pair can push now: in contact, or evaluated inline under step control. 0.4 µs, for a face that
         checks what only contact can do (a pair pressed too deep) after every step without a snapshot."""
-        return bool(np.count_nonzero(self._pushing[0]) or np.count_nonzero(self._pushing[1]))
+        return bool(np.count_nonzero(self._contact_flags[0]) or np.count_nonzero(self._contact_flags[1]))
 
     @property
     def modes(self) -> np.ndarray:
