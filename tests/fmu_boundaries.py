@@ -1,10 +1,11 @@
 """Driver for tests/test_fmu_boundaries.py: the FMU at the edges of what a host may do, through fmpy's low-level
 calls, every status and logged message kept. Run in a process of its own:
-python -m tests.fmu_boundaries FMI2.fmu FMI3.fmu NO_CONTACT_FMI2.fmu"""
+python -m tests.fmu_boundaries FMI2.fmu FMI3.fmu NO_CONTACT_FMI2.fmu FAR_BERRY_FMI2.fmu"""
 from __future__ import annotations
 
 import io
 import json
+import ctypes
 import math
 import sys
 from ctypes import byref
@@ -93,8 +94,51 @@ def crafted(blob: bytes, name: str, value: float) -> bytes:
     return out.getvalue()
 
 
-def fmi2(path, no_contact) -> dict:
+def in_initialization(path, name, params: dict) -> tuple:
+    """An instance in Initialization Mode with `params` set: (it, the status and log of exitInitializationMode)."""
+    c = Fmu2(path, name, init=False)
+    c.f.setupExperiment(startTime=0.0)
+    c.f.enterInitializationMode()
+    for k, v in params.items():
+        c.set(k, v)
+    st, msgs, _ = call(c.f.exitInitializationMode)
+    return c, (st, " ".join(msgs))
+
+
+def fmi2(path, no_contact, far_berry) -> dict:
     r = {}
+    # parameters that change which pairs can touch: refused, the outputs readable all along (an output of a pair the
+    # parameters dropped raised IndexError: Fatal, and the host's next call crashed; one the build had dropped came
+    # back and shifted the pair outputs by one)
+    c = Fmu2(path, "reach", init=False)
+    hinge = c.get("hinge_x_left")
+    c.f.setupExperiment(startTime=0.0)
+    c.f.enterInitializationMode()
+    c.set("hinge_x_left", -1.0)
+    r["reach dropped: read"] = call(c.f.getReal, [c.vr["contact_force_left_right"]])[:1]
+    st, msgs, _ = call(c.f.exitInitializationMode)
+    r["reach dropped: exit"] = (st, " ".join(msgs))
+    r["reach dropped: read after"] = call(c.f.getReal, [c.vr["contact_force_left_right"]])[:1]
+    c.set("hinge_x_left", hinge)
+    r["reach dropped: exit again"] = call(c.f.exitInitializationMode)[0]
+    r["reach dropped: step"] = c.step(1e-3)[0]
+    r["reach added: exit"] = in_initialization(far_berry, "far", {"hinge_x_far": -0.045})[1]
+    r["reach kept: exit"] = in_initialization(far_berry, "far kept", {"hinge_x_far": -0.11})[1][0]
+    # calls out of FMI's order refused, the run going on as if never made; a refused set sets none of its values
+    a, b = Fmu2(path, "order a"), Fmu2(path, "order b")
+    for f in (a, b):
+        f.set("base_ax", 2.0)
+        for _ in range(20):
+            f.step(1e-3)
+    r["order: enter init"] = call(a.f.enterInitializationMode)[0]
+    r["order: set a fixed parameter"] = a.set("mass_left", 0.02)[0]
+    r["order: exit init"] = call(a.f.exitInitializationMode)[0]
+    r["order: set two, one NaN"] = call(a.f.setReal, [a.vr["base_ax"], a.vr["base_az"]], [-5.0, math.nan])[0]
+    r["order: base_ax"] = a.get("base_ax")
+    r["order: steps"] = [a.step(1e-3)[0] for _ in range(20)] + [b.step(1e-3)[0] for _ in range(20)]
+    r["order: same angle"] = (a.get("angle_left"), b.get("angle_left"))
+    a.f.terminate()
+    r["order: after terminate"] = (a.step(1e-3)[0], a.set("base_ax", 1.0)[0], a.get("angle_left"))
     # the same FMU extracted twice in one process: each instance's refusals are still its own call's status
     a = Fmu2(path, "a")
     b = Fmu2(path, "b")
@@ -165,19 +209,8 @@ def fmi2(path, no_contact) -> dict:
     r["init outputs"] = (during, refused, again, (c.get("angle_left"), c.get("pedicel_tension_left")))
     # parameters named as the FMU names them; rtol's least value accepted
     for label, params in (("mass", {"mass_left": -1.0}), ("rtol", {"rtol": 1e-14})):
-        c = Fmu2(path, f"param {label}", init=False)
-        c.f.setupExperiment(startTime=0.0)
-        c.f.enterInitializationMode()
-        for k, v in params.items():
-            c.set(k, v)
-        st, msgs, _ = call(c.f.exitInitializationMode)
-        r[f"param {label}"] = (st, " ".join(msgs))
-    c = Fmu2(no_contact, "no contact", init=False)
-    c.f.setupExperiment(startTime=0.0)
-    c.f.enterInitializationMode()
-    c.set("restitution", 0.5)
-    st, msgs, _ = call(c.f.exitInitializationMode)
-    r["no contact restitution"] = (st, " ".join(msgs))
+        r[f"param {label}"] = in_initialization(path, f"param {label}", params)[1]
+    r["no contact restitution"] = in_initialization(no_contact, "no contact", {"restitution": 0.5})[1]
     # a pair pressed past the depth any contact law holds at: doStep says so with Warning, the step taken
     c = Fmu2(path, "deep", {"contact_stiffness": 1.0, "initial_angle_right": 0.8})
     bound = 0.2 * min(c.get("radius_left"), c.get("radius_right"))
@@ -221,11 +254,31 @@ def fmi3(path) -> dict:
         st, msgs, _ = call(deep.doStep, k * 1e-3, 1e-3)
         said.append((st, " ".join(msgs)))
     r["deep"] = {"steps": said, "time": deep.getFloat64([vr["time"]])[0]}
+    # what this FMU has not got (other variable types, event and configuration modes, clocks, derivatives): Error, the
+    # host alive (pythonfmu3 threw a C++ exception from most: the host aborted) and the instance stepping on
+    calls = {"getFloat32": ([vr["angle_left"]],), "setInt8": ([vr["base_ax"]], [1]), "getBinary": ([vr["angle_left"]],),
+             "getClock": ([vr["angle_left"]],), "enterEventMode": (), "enterConfigurationMode": (),
+             "updateDiscreteStates": (), "getAdjointDerivative": ([vr["angle_left"]], [vr["base_ax"]], [1.0])}
+    r["unsupported"] = {name: call(getattr(a, name), *args)[0] for name, args in calls.items()}
+    r["unsupported: empty get"] = call(a.getFloat32, [])[0]
+    r["unsupported: step after"] = call(a.doStep, 0.0, 1e-3)[0]
+    # doStep's output arguments, pre-filled with what a careless FMU would leave: an OK step, a Discard (too long
+    # to integrate) and an Error (not from the FMU's time)
+    raw = a.dll.fmi3DoStep
+    raw.restype, raw.argtypes = ctypes.c_int, [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int,
+                                               *[ctypes.c_void_p] * 4]
+
+    def step(t, h):
+        flags, last = [ctypes.c_bool(True) for _ in range(3)], ctypes.c_double(-1.0)
+        st = raw(a.component, t, h, 1, *map(ctypes.byref, flags), ctypes.byref(last))
+        return st, [x.value for x in flags], last.value
+
+    r["doStep outputs"] = [step(1e-3, 1e-3), step(2e-3, 1e6), step(1.0, 1e-3)]
     return r
 
 
 def main(argv):
-    out = {"fmi2": fmi2(argv[0], argv[2]), "fmi3": fmi3(argv[1])}
+    out = {"fmi2": fmi2(argv[0], argv[2], argv[3]), "fmi3": fmi3(argv[1])}
     print("JSON:" + json.dumps(out), flush=True)
     sys.stdout.flush()
 

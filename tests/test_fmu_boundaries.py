@@ -18,11 +18,26 @@ ROOT = Path(__file__).resolve().parents[1]
 ERROR = 3
 
 
+#: a third berry out of the default scene's reach (its pairs left out of the build) unless its hinge moves 5.5 cm
+FAR_BERRY = """
+[[berries]]
+name = "far"
+mass = 0.011
+radius = 0.0135
+twig_length = 0.03
+hinge_x = -0.2
+hinge_stiffness = 1.0e-3
+hinge_damping = 2.0e-5
+"""
+
+
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
     d = tmp_path_factory.mktemp("fmu")
+    far = d / "far.toml"
+    far.write_text((ROOT / "src/grapefmu/scenes/default.toml").read_text() + FAR_BERRY)
     fmus = [build_fmu(d / "d2.fmu", 2), build_fmu(d / "d3.fmu", 3),
-            build_fmu(d / "bare2.fmu", 2, "scenes/paper/test1.toml")]
+            build_fmu(d / "bare2.fmu", 2, "scenes/paper/test1.toml"), build_fmu(d / "far2.fmu", 2, str(far))]
     r = subprocess.run([sys.executable, "-m", "tests.fmu_boundaries", *map(str, fmus)], cwd=ROOT,
                        capture_output=True, text=True, timeout=900)
     assert "JSON:" in r.stdout, r.stderr[-3000:]
@@ -119,3 +134,51 @@ def test_a_pair_pressed_past_any_contact_law_is_a_warning_with_the_step_taken(re
     r3 = results["fmi3"]["deep"]
     assert [k for k, (st, m) in enumerate(r3["steps"]) if "where no contact law holds" in m] == warned
     assert all(st == 0 for st, _ in r3["steps"]) and r3["time"] == pytest.approx(0.6)
+
+
+def test_parameters_that_change_which_pairs_can_touch_are_refused_naming_them(results):
+    """The outputs name the built scene's pairs. A hinge moved so far that the pair can never touch dropped it: reading
+    its output raised IndexError (Fatal), and the host's next call crashed. A far berry's hinge moved within reach
+    brought back a pair the build had left out, and every later pair's output then showed another pair's force. Now
+    exitInitializationMode refuses both, naming the parameter; the outputs read without error meanwhile, and the
+    instance initializes once the parameter is back."""
+    r = results["fmi2"]
+    assert r["reach dropped: read"] == r["reach dropped: read after"] == [0]
+    status, log = r["reach dropped: exit"]
+    assert status == ERROR and "hinge_x_left = -1.0: puts berries 'left' and 'right' out of each other's reach" in log
+    assert "(left_right)" in log
+    assert r["reach dropped: exit again"] == 0 and r["reach dropped: step"] == 0
+    status, log = r["reach added: exit"]
+    assert status == ERROR and "hinge_x_far = -0.045: puts berries 'left' and 'far' within reach" in log, log
+    assert r["reach kept: exit"] == 0  # moved, but still out of reach: the pairs are the built ones
+
+
+def test_calls_out_of_fmi_order_are_refused_and_change_nothing(results):
+    """enterInitializationMode and exitInitializationMode in Step Mode returned OK and restarted the run at t = 0;
+    doStep after terminate went on integrating; a setReal refused for one value set the others. Each is now refused,
+    and the instance then steps exactly as a twin that never made those calls."""
+    r = results["fmi2"]
+    assert r["order: enter init"] == r["order: set a fixed parameter"] == r["order: exit init"] == ERROR
+    assert r["order: set two, one NaN"] == ERROR and r["order: base_ax"] == 2.0
+    assert r["order: steps"] == [0] * 40
+    assert r["order: same angle"][0] == r["order: same angle"][1]
+    step, set_input, angle = r["order: after terminate"]
+    assert step == set_input == ERROR and angle == r["order: same angle"][0]
+
+
+def test_fmi3_calls_this_fmu_has_nothing_for_are_errors_the_host_survives(results):
+    """pythonfmu3 throws a C++ exception from most of them (std::logic_error: the host aborted) or raised in Python
+    (updateDiscreteStates: Fatal); enterEventMode and enterConfigurationMode returned OK."""
+    r = results["fmi3"]
+    assert r["unsupported"] == {name: ERROR for name in r["unsupported"]}
+    assert r["unsupported: empty get"] == 0 and r["unsupported: step after"] == 0
+
+
+def test_fmi3_do_step_sets_every_output_argument(results):
+    """pythonfmu3 wrote none of the flags (a host's pre-filled True came back as 'event handling needed' and 'early
+    return') and gave the step's end as lastSuccessfulTime after a Discard or an Error. Now all flags are False and
+    lastSuccessfulTime is where the FMU is: the step's end, or its time before a refused step."""
+    ok, discard, error = results["fmi3"]["doStep outputs"]
+    assert ok == [0, [False] * 3, pytest.approx(2e-3, abs=1e-15)]
+    assert discard[0] == 2 and discard[1:] == [[False] * 3, pytest.approx(2e-3, abs=1e-15)]
+    assert error[0] == ERROR and error[1:] == [[False] * 3, pytest.approx(2e-3, abs=1e-15)]

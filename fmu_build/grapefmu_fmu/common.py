@@ -17,7 +17,7 @@ from grapefmu.model.bounds import bound
 from grapefmu.model.model import SolverSettings
 from grapefmu.solver.warmup import notice
 
-from .core import ERROR, OK, FmuCore
+from .core import ERROR, OK, WARNING, FmuCore
 from .report import binaries, in_call, refuse
 
 #: s: the largest start time's magnitude, a scene's longest run (solver.t_end): beyond it the time's resolution
@@ -149,6 +149,13 @@ class GrapeSlaveMixin:
         return var
 
     def _get(self, vrs, kind) -> list:
+        try:
+            return self._read(vrs, kind)
+        except Exception as e:  # noqa: BLE001 - nothing may reach pythonfmu; this is a bug, reported as Error
+            self._refuse(f"get{kind.__name__}: {type(e).__name__}: {e}")
+            return ["" if kind.__name__ == "String" else 0] * len(vrs)
+
+    def _read(self, vrs, kind) -> list:
         try:  # every reference readable as this kind: the common call, one dictionary lookup each
             getters = self._getters[kind]
             return [getters[vr]() for vr in vrs]
@@ -161,6 +168,10 @@ class GrapeSlaveMixin:
         return out
 
     def _set(self, vrs, values, kind) -> None:
+        """All the call's values, or none when one is refused (the FMU keeps its values)."""
+        if self.phase == "terminated":
+            self._refuse(f"set{kind.__name__}: the FMU is terminated; reset it to set values again; refused")
+            return
         inputs = self._inputs.get(kind, {})
         try:  # finite floats within range on inputs: the common call, checked inline
             for vr, x in zip(vrs, values, strict=True):
@@ -176,18 +187,36 @@ class GrapeSlaveMixin:
         if len(vrs) != len(values):
             self._refuse(f"set{kind.__name__}: {len(vrs)} value references but {len(values)} values")
             return
+        accepted = []
         for vr, x in zip(vrs, values):
             var = self._variable(vr, kind, True)
-            if var is None:
-                continue
-            problem = self.core.value_problem(var.name, x)
+            problem = var is not None and self.core.value_problem(var.name, x)
             if problem:
                 self._refuse(problem)
-            else:
-                var.setter(x)
+            elif var is not None:
+                accepted.append((var, x))
+        if len(accepted) < len(vrs):
+            if accepted:
+                self._refuse(f"set{kind.__name__}: none of the call's {len(vrs)} values set, as one was refused")
+            return
+        for var, x in accepted:
+            var.setter(x)
 
     # --- modes and steps --------------------------------------------------------------------------
+    def _in_phase(self, call: str, phase: str) -> bool:
+        """Whether the FMU is in `phase` (core.PHASES), as `call` requires; refused (False) otherwise, the FMU keeping
+        its state (pythonfmu lets any call through in any state)."""
+        if self.phase == phase:
+            return True
+        after = {"instantiated": "instantiate or reset", "initialization": "enterInitializationMode",
+                 "step": "exitInitializationMode", "terminated": "terminate"}
+        self._refuse(f"{call}: not allowed after {after[self.phase]} (it must follow {after[phase]}); refused, the FMU "
+                     "keeps its state")
+        return False
+
     def enter_initialization_mode(self):
+        if not self._in_phase("enterInitializationMode", "instantiated"):
+            return
         if self.FMI == 3:  # pythonfmu3 passes FMI 3's startTime to nobody: the binary kept it
             given, t = in_call(GrapeSlaveMixin._binaries, "grapefmu_start_time", [], ctypes.c_double)
             if given and not self._start(t):
@@ -195,6 +224,8 @@ class GrapeSlaveMixin:
         self.phase = "initialization"
 
     def exit_initialization_mode(self):
+        if not self._in_phase("exitInitializationMode", "initialization"):
+            return
         notice(lambda line: self._refuse(line, OK))  # logged (status OK) before the core's first compile
         err = self.core.initialize(self.start_time)
         self._bounds_changed()
@@ -206,12 +237,20 @@ class GrapeSlaveMixin:
     def _step(self, current_time, step_size) -> None:
         """Integrate the communication step. What the core says goes to the binary, which makes doStep return it:
         Error or Discard with the state unchanged, Warning with the step taken (do_step itself always returns True)."""
-        try:
-            said = self.core.step(current_time, step_size)
-        except Exception as e:  # noqa: BLE001 - nothing may reach pythonfmu; this is a bug, reported as Error
-            said = (ERROR, f"doStep failed: {type(e).__name__}: {e}")
+        if self.phase == "terminated":
+            said = (ERROR, f"doStep: not allowed after terminate; refused, the FMU stays at t = {self.core.time!r} s")
+        else:
+            try:
+                said = self.core.step(current_time, step_size)
+            except Exception as e:  # noqa: BLE001 - nothing may reach pythonfmu; this is a bug, reported as Error
+                said = (ERROR, f"doStep failed: {type(e).__name__}: {e}")
         if said:
             self._refuse(said[1], said[0])
+            if said[0] > WARNING and self.FMI == 3:  # the time it stays at: FMI 3's lastSuccessfulTime
+                in_call(GrapeSlaveMixin._binaries, "grapefmu_reached", [ctypes.c_double], None, self.core.time)
+
+    def terminate(self):
+        self.phase = "terminated"
 
     # --- FMU state --------------------------------------------------------------------------------
     def _get_fmu_state(self):

@@ -49,8 +49,9 @@ INPUT_BOUNDS = {name: kind[1] for name, kind in INPUT_KIND.items()}
 #: the angular inputs per world axis x, y, z: (angular acceleration, angular velocity)
 ANGULAR_INPUTS = tuple(zip(ACCEL_INPUTS[3:], OMEGA_INPUTS))
 OK, WARNING, DISCARD, ERROR, FATAL = range(5)  # fmi2Status and fmi3Status share these codes
-#: the FMI phases an FMU state can be taken in (common.py): before, during and after initialization
-PHASES = ("instantiated", "initialization", "step")
+#: the FMI phases an FMU state can be taken in (common.py): before, during and after initialization, and after
+#: terminate (only a reset, or a state set, leaves it)
+PHASES = ("instantiated", "initialization", "step", "terminated")
 #: the parameters of the scene's [contact] law
 CONTACT_PARAMETERS = ("contact_law", "contact_stiffness", "contact_damping", "restitution")
 
@@ -206,7 +207,7 @@ class FmuCore:
             if v["rtol"] > 0 else 1e-10
         doc["solver"]["method"] = "event"
         try:
-            return scene_from_dict(doc, self.base_dir, name=self.scene.name)
+            scene = scene_from_dict(doc, self.base_dir, name=self.scene.name)
         except SceneError as e:  # the orientation is checked by the scene's validator: name the parameters
             if not e.key.startswith("excitation.orientation"):
                 raise
@@ -215,6 +216,31 @@ class FmuCore:
                 raise GrapefmuError(f"{', '.join(f'{k} = {v[k]!r}' for k in ORIENTATION)}: {why}; for planar berries "
                                     f"{ORIENTATION[0]} must be 0") from None
             raise GrapefmuError(f"{ORIENTATION[int(e.key[-2])]}: {why}") from None
+        self._refuse_other_pairs(scene.model, v)
+        return scene
+
+    def _refuse_other_pairs(self, model, v: dict) -> None:
+        """Refuse parameters that change which pairs can touch (a hinge, twig or radius that puts two berries within
+        or out of reach of each other): the FMU's outputs name the pairs of the scene it was built from, one per
+        element, and a pair more or less would shift every pair's output onto another."""
+        built = [(p.i, p.j) for p in self.model.pairs]
+        now = [(p.i, p.j) for p in model.pairs]
+        if now == built:
+            return
+        i, j = next(p for p in now + built if (p in now) != (p in built))
+        a, b = self.model.body_names[i], self.model.body_names[j]
+        start = self._start_values()
+        changed = [f"{k} = {v[k]!r}" for k in (f"{q}_{n}" for n in (a, b) for q in ("hinge_x", "twig_length", "radius"))
+                   if k in v and v[k] != start[k]]
+        what = ", ".join(changed) or "these parameters"
+        if (i, j) in now:
+            raise GrapefmuError(f"{what}: puts berries '{a}' and '{b}' within reach of each other, a contact pair this "
+                                f"FMU was built without (its outputs are for the pairs it was built with); build an "
+                                f"FMU from a scene with these values (grapefmu build-fmu)")
+        pair = self.model.pair_name(built.index((i, j)))
+        raise GrapefmuError(f"{what}: puts berries '{a}' and '{b}' out of each other's reach, which drops their "
+                            f"contact pair ({pair}), whose outputs this FMU has; keep them within reach, or build an "
+                            "FMU from a scene with these values (grapefmu build-fmu)")
 
     def _input_bounds(self) -> dict[str, float]:
         """The largest magnitude each input takes: the solver's bound, or 0 for an angular input about a world axis
@@ -254,10 +280,10 @@ class FmuCore:
             ok = isinstance(value, int) and not isinstance(value, bool)
         else:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-        if not ok:
-            return f"{name} = {value!r}: expected a finite {kind.__name__}; value refused"
         bound = self.input_bounds.get(name)
-        if bound is not None and abs(value) > bound:
+        if not ok and not (bound and type(value) is float):  # an input's NaN or ±inf: its range says why
+            return f"{name} = {value!r}: expected a finite {kind.__name__}; value refused"
+        if bound is not None and not abs(value) <= bound:
             what, _, unit = INPUT_KIND[name]
             if bound == 0.0:
                 return f"input {name} = {value!r}: {self._planar_turn()}; value refused"
@@ -404,7 +430,8 @@ class FmuCore:
             problem = self.value_problem(name, x) if type(x) is type(self.values[name]) else f"{name}: wrong type"
             if problem:
                 raise StateError(f"FMU state: {problem}")
-        if state.get("phase") not in PHASES or (state["solver"] is not None) != (state["phase"] == "step"):
+        phase = state.get("phase")
+        if phase not in PHASES or (phase != "terminated" and (state["solver"] is not None) != (phase == "step")):
             raise StateError(f"FMU state: phase {state.get('phase')!r} does not fit its solver state")
         solver = None
         if state["solver"] is not None:

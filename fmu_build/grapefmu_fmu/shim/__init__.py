@@ -47,8 +47,33 @@ def _params(text: str) -> list[tuple[str, str]]:
     return out
 
 
+#: the FMI 3 functions forwarded to pythonfmu3 (besides shim.c's own): every other one is refused in the binary, as
+#: this FMU has no variables of the other types, no event, configuration or continuous-time mode, no clocks and no
+#: derivatives, and pythonfmu3 answers most of them with a C++ exception that aborts the host
+FMI3_FORWARDED = {"fmi3SetDebugLogging", "fmi3ExitInitializationMode", "fmi3Terminate", "fmi3Reset",
+                  *(f"fmi3{a}{t}" for a in ("Get", "Set") for t in ("Float64", "Int32", "Int64", "UInt64", "Boolean",
+                                                                      "String")),
+                  "fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState", "fmi3SerializedFMUStateSize",
+                  "fmi3SerializeFMUState", "fmi3DeserializeFMUState"}
+#: an accessor of a type this FMU has no variable of: fine with no value references, else an unknown one
+_NO_VARIABLES = re.compile(r"fmi3(?:Get|Set)(Float32|U?Int8|U?Int16|UInt32|Binary|Clock)")
+
+
+def _refusing(name: str, ps: list[tuple[str, str]]) -> str:
+    """The body of a function the binary refuses (FMI3_FORWARDED), logging why."""
+    head = f"    Instance* I = (Instance*){ps[0][1]};\n"
+    kind = _NO_VARIABLES.fullmatch(name)
+    if kind:
+        return (head + f"    if ({ps[2][1]} == 0) return fmi3OK;\n"
+                f'    say(I, STATUS_ERROR, "{name}: value reference %u: this FMU has no variable of type '
+                f'{kind[1]}", (unsigned){ps[1][1]}[0]);\n    return fmi3Error;\n')
+    return (head + f'    say(I, STATUS_ERROR, "{name}: not supported by this FMU (co-simulation in step mode only: no '
+            f'event, configuration or continuous-time mode, clocks or derivatives)");\n    return fmi3Error;\n')
+
+
 def forwarders(version: int, template: str) -> str:
-    """C forwarders for every function of fmi<version>FunctionTypes.h that the template does not define."""
+    """C forwarders for every function of fmi<version>FunctionTypes.h that the template does not define (for FMI 3,
+    refusals for those it does not forward)."""
     text = (headers() / f"fmi{version}FunctionTypes.h").read_text()
     defined = set(re.findall(r"^\w[\w\s\*]*?\b(fmi[23]\w+)\s*\(", template, re.M))
     out = []
@@ -62,7 +87,9 @@ def forwarders(version: int, template: str) -> str:
         decl = ", ".join(d for d, _ in ps)
         args = ", ".join(["I->inner"] + [n for _, n in ps[1:]])
         inner = f"INNER({name})"
-        if ret == "void":
+        if version == 3 and name not in FMI3_FORWARDED:
+            body = _refusing(name, ps)
+        elif ret == "void":
             body = f"    Instance* I = (Instance*){ps[0][1]};\n    if (I && {inner}) {inner}({args});\n"
         else:
             body = (f"    Instance* I = (Instance*){ps[0][1]};\n"

@@ -62,6 +62,13 @@ static __thread double start_given;  /* the startTime of the current fmi3EnterIn
 /* Called by the Python side during fmi3EnterInitializationMode: pythonfmu3 passes the start time on to nobody. */
 __attribute__((visibility("default"))) double grapefmu_start_time(void) { return start_given; }
 
+#if FMI_VERSION == 3
+static __thread double reached; /* the FMU's time after the step the current fmi3DoStep refused */
+
+/* Called by the Python side when it refuses a step: the time the FMU stays at, fmi3DoStep's lastSuccessfulTime. */
+__attribute__((visibility("default"))) void grapefmu_reached(double t) { reached = t; }
+#endif
+
 static int settle(int status)
 {
     int p = pending;
@@ -402,9 +409,20 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
         return fmi3Error;
     }
     ENTER(I);
-    return (fmi3Status)settle(INNER(fmi3DoStep)(I->inner, currentCommunicationPoint, communicationStepSize,
-                                                noSetFMUStatePriorToCurrentPoint, eventHandlingNeeded,
-                                                terminateSimulation, earlyReturn, lastSuccessfulTime));
+    reached = currentCommunicationPoint;
+    /* pythonfmu3 sets none of the flags, and lastSuccessfulTime to the step's end whatever the status: this FMU never
+       needs event handling, never returns early and never asks to terminate; a refused step leaves it where it was */
+    fmi3Boolean ignored[3];
+    fmi3Float64 inner_time;
+    fmi3Status status = (fmi3Status)settle(INNER(fmi3DoStep)(I->inner, currentCommunicationPoint,
+                                                             communicationStepSize, noSetFMUStatePriorToCurrentPoint,
+                                                             &ignored[0], &ignored[1], &ignored[2], &inner_time));
+    if (eventHandlingNeeded) *eventHandlingNeeded = fmi3False;
+    if (terminateSimulation) *terminateSimulation = fmi3False;
+    if (earlyReturn) *earlyReturn = fmi3False;
+    if (lastSuccessfulTime)
+        *lastSuccessfulTime = status <= fmi3Warning ? currentCommunicationPoint + communicationStepSize : reached;
+    return status;
 }
 
 #endif
