@@ -38,6 +38,15 @@ from .conftest import dual, scene
      "berries[0].rest_angles[0]", "±80°"),
     (lambda d: d.update(solver={"max_steps": None}), "solver.max_steps", "leave a setting out"),  # no TOML null
     (lambda d: d["contact"].update(stiffness=None), "contact.stiffness", "got NoneType"),
+    # names that combine into another's: one frame, column or topic for two (found by an audit: the CSV dropped a
+    # pair's force, the MCAP put two pairs on one topic, and TF gave a frame two parents)
+    (lambda d: d["berries"][1].update(name="left_hinge"), "berries[1].name", "frame name 'left_hinge', which 'left'"),
+    (lambda d: d["berries"][1].update(name="rachis"), "berries[1].name", "names the rachis' frame"),
+    (lambda d: (d["berries"][0].update(name="x", kind="spherical", angle=[0.0, 0.0]),
+                d["berries"][1].update(name="x_swing", angle=0.0)), "berries[1].name", "angle name 'x_swing'"),
+    (lambda d: d.update(berries=[{**d["berries"][0], "name": n, "hinge_x": x, "angle": 0.0}
+                                 for n, x in (("a", -0.045), ("b_c", -0.015), ("a_b", 0.015), ("c", 0.045))]),
+     "berries[3].name", "contact pair name 'a_b_c', which 'b_c' gives too"),
 ])
 def test_bad_value_is_named(mutate, key, words):
     doc = dual()

@@ -109,6 +109,7 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     thresholds = _thresholds(doc.get("thresholds", {}))
     obstacles, touching = _obstacles(doc["obstacles"], berries, thresholds) if "obstacles" in doc else ([], [])
     model = Model(tuple(berries), tuple(pairs) + tuple(touching), tuple(couplings), gravity, pruned, tuple(obstacles))
+    _distinct_names(model)
     solver = _solver(doc.get("solver", {}))
     check_state(len(model.pairs), solver.zeno_max_events)  # values in range that together would not fit
     excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)
@@ -168,6 +169,31 @@ def _name(key: str, raw: Any, seen: set[str]) -> str:
         raise SceneError(f"{key}.name", f"{raw!r} already names a berry or an obstacle")
     seen.add(raw)
     return raw
+
+
+def _distinct_names(model: Model) -> None:
+    """Refuse names that combine into another's: a berry's TF frames (rachis, <berry>, <berry>_hinge:
+    recording/frames.py), its angles (<berry>, or <berry>_swing and _tilt) and a pair's name (<a>_<b>) each name a
+    frame, a column, a topic or an FMU variable, and two alike write one over the other (berries a, b_c, a_b and c
+    give pairs a_b_c twice)."""
+    nb, bodies = model.n_berries, model.body_names
+
+    def key(k: int) -> str:
+        return f"berries[{k}].name" if k < nb else f"obstacles[{k - nb}].name"
+
+    kinds = {"frame": [("rachis", None)] + [(f, k) for k, n in enumerate(model.names) for f in (n, f"{n}_hinge")],
+             "angle": [(d, k) for k, b in enumerate(model.berries)
+                       for d in ((f"{b.name}_swing", f"{b.name}_tilt") if b.spherical else (b.name,))],
+             "contact pair": [(model.pair_name(p), max(pr.i, pr.j)) for p, pr in enumerate(model.pairs)]}
+    for what, named in kinds.items():
+        seen: dict[str, int | None] = {}
+        for name, k in named:
+            if name in seen and seen[name] is None:
+                raise SceneError(key(k), f"{name!r} names the rachis' frame; rename the berry")
+            if name in seen:
+                raise SceneError(key(k), f"{bodies[k]!r} gives the {what} name {name!r}, which {bodies[seen[name]]!r} "
+                                 "gives too (names joined by _ can make another's); rename one")
+            seen[name] = k
 
 
 def _angles(key: str, raw: Any, nd: int, b: Bound) -> tuple[float, ...]:
