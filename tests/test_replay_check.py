@@ -3,6 +3,7 @@ to its last complete chunk, exit 0) from a corrupted one (a CRC, parse or decode
 the record, non-zero exit), and any deviation above the tolerance fails the check."""
 from __future__ import annotations
 
+import json
 import math
 
 import subprocess
@@ -151,13 +152,16 @@ def test_a_damaged_chunk_is_named_with_its_offset_and_time(recordings, tmp_path,
     assert r.returncode != 0 and "Traceback" not in r.stderr and "corrupted" in r.stderr
 
 
-def rewrite(original: Path, out: Path, change, compression=CompressionType.ZSTD) -> None:
+def rewrite(original: Path, out: Path, change, compression=CompressionType.ZSTD, meta_change=None) -> None:
     """Copy a recording message by message through the typestore, `change(topic, log_time, message)`
-    editing the decoded message in place (the CRCs are those of the new bytes)."""
+    editing the decoded message in place (the CRCs are those of the new bytes), and `meta_change(metadata)` each
+    metadata record's map."""
     with open(original, "rb") as fh:
         reader = make_reader(fh)
         meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
         msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages()]
+    for data in meta.values() if meta_change else ():
+        meta_change(data)
     with McapWriter(out, compression=compression, chunk_size=2048) as w:
         for name, data in meta.items():
             w.add_metadata(name, data)
@@ -185,6 +189,38 @@ def test_a_deviation_above_the_tolerance_fails(recordings, tmp_path, capsys, fie
         assert rc == 0
     else:
         assert rc == 1 and "t = 0.020000 s" in out and "tolerance" in out
+
+
+@pytest.mark.parametrize("key, value, unmatched", [("t_end", 0.02, 30), ("output_interval", 0.002, 25)])
+def test_settings_that_do_not_describe_the_recorded_run_fail(recordings, tmp_path, capsys, key, value, unmatched):
+    """A recording whose metadata gives a shorter run or a coarser grid than its joint states passed: only the states
+    at the re-simulated samples were compared, the rest skipped without a word (found by an audit)."""
+    def settings(meta):
+        if "solver" in meta:
+            meta["solver"] = json.dumps(json.loads(meta["solver"]) | {key: value})
+    path = tmp_path / "settings.mcap"
+    rewrite(recordings["chunked"], path, lambda *_: None, meta_change=settings)
+    r = check(path)
+    assert not r.ok and r.unmatched == unmatched and r.max_deviation == 0.0
+    rc, out = replay(path, capsys)
+    assert rc == 1 and f"{unmatched} recorded joint states" in out and "no sample in the re-simulation" in out
+
+
+def test_a_reference_run_is_checked_and_a_method_grapefmu_does_not_run_is_refused(tmp_path, capsys):
+    """The reference method's recordings named it "reference (DOP853)", which replay handed to simulate(): every
+    check failed (exit 1, as a deviation). Recordings written so are still read; a method that is none of grapefmu's
+    is refused naming the file (exit 2)."""
+    path = tmp_path / "reference.mcap"
+    write_mcap(simulate(load_scene(default_scene_path()), 0.05, method="reference"), path, chunk_size=2048)
+    r = check(path)
+    assert r.ok and r.compared == 51 and r.max_deviation == 0.0
+    for method, rc_expected in (("reference (DOP853)", 0), ("bogus", 2)):
+        named = tmp_path / f"{method}.mcap"
+        rewrite(path, named, lambda *_: None,
+                meta_change=lambda meta, method=method: meta.update(method=method) if "method" in meta else None)
+        rc, out = replay(named, capsys)
+        assert rc == rc_expected, out
+    assert f"{named}: the recorded method 'bogus' is none of event, paper, reference" in out
 
 
 def test_a_nan_in_a_recorded_angle_is_a_deviation(recordings, tmp_path):

@@ -339,6 +339,11 @@ def cmd_replay(a: argparse.Namespace) -> int:
     print(f"re-simulated from {'the scene' if r.source == 'scene' else 'the recorded applied inputs'}; "
           f"{r.compared} joint states compared")
     print(f"  largest deviation: angle {r.max_angle_deviation:.3g} rad, angular velocity {r.max_rate_deviation:.3g} rad/s")
+    if r.unmatched:
+        print(f"grapefmu: check failed: {a.recording}: {r.unmatched} recorded joint states (the first at t = "
+              f"{r.first_unmatched:.6f} s) have no sample in the re-simulation: the recorded settings (t_end, "
+              "output_interval) do not describe the run that wrote them", file=sys.stderr)
+        return 1
     if not r.ok:
         print(f"grapefmu: check failed: {a.recording}: the recorded joint states deviate by up to "
               f"{r.max_deviation:.3g} (at t = {r.worst_time:.6f} s), more than the tolerance {r.tolerance:g} rad, rad/s",

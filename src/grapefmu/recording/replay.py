@@ -238,6 +238,10 @@ class CheckResult:
     truncated: str | None
     worst_time: float = math.nan   # s, the recorded time of the largest deviation
     tolerance: float = TOLERANCE
+    #: recorded joint states the re-simulation has no sample at (settings that do not describe the recorded run), and
+    #: the time of the first
+    unmatched: int = 0
+    first_unmatched: float = math.nan
 
     @property
     def max_deviation(self) -> float:
@@ -245,8 +249,8 @@ class CheckResult:
 
     @property
     def ok(self) -> bool:
-        """Every compared joint state within the tolerance (NaN counts as a deviation)."""
-        return self.max_deviation <= self.tolerance
+        """Every recorded joint state compared, and within the tolerance (NaN counts as a deviation)."""
+        return self.max_deviation <= self.tolerance and not self.unmatched
 
 
 def _deviation(a: np.ndarray, b: np.ndarray) -> float:
@@ -283,8 +287,18 @@ def _pinned(scene, cfg: dict, method: str | None):
     return replace(scene, solver=replace(s, integrator=named))
 
 
+#: the methods a recording may name (recordings before 2026-11-30 named the reference "reference (DOP853)")
+METHODS = ("event", "paper", "reference")
+
+
 def _settings(path: Path, rec: Recording):
-    """The scene and solver settings a recording was made with, or a RecordingError saying why not."""
+    """The scene, solver settings and method (None: the scene's) a recording was made with, or a RecordingError saying
+    why not."""
+    method = rec.metadata.get("method")
+    if method is not None and method.startswith("reference ("):
+        method = "reference"
+    if method is not None and method not in METHODS:
+        raise RecordingError(f"{path}: the recorded method {method!r} is none of {', '.join(METHODS)}")
     try:
         scene = parse_scene(rec.metadata["scene_toml"], name=rec.metadata.get("scene_name", "scene"))
         cfg = json.loads(rec.metadata.get("solver", "{}"))
@@ -299,7 +313,7 @@ def _settings(path: Path, rec: Recording):
         raise RecordingError(f"{path}: the recorded scene is not valid: {e}") from None
     except ValueError as e:  # json.JSONDecodeError included
         raise RecordingError(f"{path}: the recorded solver settings are not valid: {e}") from None
-    return scene, cfg
+    return scene, cfg, method
 
 
 def _by_interval(rec: Recording, topic: str, applied: list, at: list[int]) -> tuple[dict[int, object], int | None]:
@@ -325,7 +339,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
     is within `tolerance`."""
     path = Path(path)
     rec = read_recording(path, {"joint_states", "rachis/accel_applied", "rachis/twist_applied", "sim_time"})
-    scene, solver_cfg = _settings(path, rec)
+    scene, solver_cfg, method = _settings(path, rec)
     n_dof = scene.model.n_dof
     states = []  # (logged at = the header's stamp in ns, angles, rates), in the file's order
     for ns, m in rec.topics.get("joint_states", []):
@@ -337,10 +351,11 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
     if not states:
         raise RecordingError(f"{path}: no joint_states to compare")
     source = rec.metadata.get("input_source", "scene")
-    scene = _pinned(scene, solver_cfg, rec.metadata.get("method"))
+    scene = _pinned(scene, solver_cfg, method)
     dq = dw = 0.0
     worst, worst_t = -1.0, math.nan
-    n = 0
+    n = unmatched = 0
+    first_unmatched = math.nan
 
     def compare(t: int, q, w, angles, rates) -> None:
         nonlocal dq, dw, worst, worst_t, n
@@ -356,14 +371,16 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
             # run under another "auto" rule (none before it existed: one step size), as that rule chose
             islands = scene.model.n_berries >= _islands_from(solver_cfg)
             scene = replace(scene, solver=replace(scene.solver, islands=islands))
-        run = simulate(scene, solver_cfg.get("t_end"), method=rec.metadata.get("method"), rtol=solver_cfg.get("rtol"),
+        run = simulate(scene, solver_cfg.get("t_end"), method=method, rtol=solver_cfg.get("rtol"),
                        atol=solver_cfg.get("atol"), output_interval=solver_cfg.get("output_interval"),
                        cross_check=False)
         recorded = {ns: (q, w) for ns, q, w in states}
         for k, t in enumerate(run.t):
             key = to_ns(t)
             if key in recorded:
-                compare(key, *recorded[key], run.angles[k], run.angular_velocities[k])
+                compare(key, *recorded.pop(key), run.angles[k], run.angular_velocities[k])
+        unmatched = len(recorded)  # a shorter t_end or a coarser grid than the run that wrote them
+        first_unmatched = seconds(min(recorded)) if recorded else math.nan
     else:
         from ..solver.solver import Solver
         # the node's solver is driven by its inputs (metadata "turning"). Recordings before it could say so had
@@ -408,4 +425,4 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
                         solver.angles, solver.angular_velocities)
     if n == 0:
         raise RecordingError(f"{path}: no recorded joint state matches a re-simulated time")
-    return CheckResult(n, dq, dw, source, rec.truncated, worst_t, tolerance)
+    return CheckResult(n, dq, dw, source, rec.truncated, worst_t, tolerance, unmatched, first_unmatched)

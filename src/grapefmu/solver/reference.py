@@ -180,7 +180,8 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
     run = Run(scene, tt, np.concatenate(out_y)[:, :ny], ContactLog.of(np.concatenate(out_contacts).reshape(len(tt), npair)),
               np.concatenate(out_acc), np.zeros(len(tt), dtype=TOTALS),
               impacts, peak_force, np.zeros(m.n_berries),
-              {"method": f"reference ({integrator})", "rhs_evaluations": nfev, "segments": segments, "wall_time": wall})
+              {"method": "reference", "integrator": integrator, "rhs_evaluations": nfev, "segments": segments,
+               "wall_time": wall})
     # totals from the impact book, each segment's refined peaks (as of the segment before a sample, as the
     # event solver's are as of its step before) and the samples themselves
     tension = np.maximum.accumulate(run.pedicel_tension, axis=0)
