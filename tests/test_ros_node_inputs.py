@@ -160,6 +160,17 @@ def test_a_bad_parameter_is_one_line_naming_it(tmp_path, value, words):
     assert [line for line in r.stderr.splitlines() if line.startswith("grapefmu_ros: error:")]
 
 
+@pytest.mark.parametrize("args, words", [(["-p", "use_sim_time:=maybe"], "use_sim_time"),
+                                         (["--params-file", "/nonexistent/params.yaml"], "ROS arguments")])
+def test_a_bad_ros_argument_is_one_line(args, words):
+    """rclpy's own parameter (use_sim_time) of the wrong type, and a parameters file that cannot be read, were
+    tracebacks with exit 1 (found by an audit)."""
+    r = subprocess.run([sys.executable, "-m", "grapefmu_ros", "--ros-args", *args], env=ENV, capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert any(line.startswith("grapefmu_ros: error:") and words in line for line in r.stderr.splitlines()), r.stderr
+
+
 def test_diagnostics_warn_of_berries_pressed_past_any_contact_law(ros, tmp_path):
     """A controller that drives the gripper down through the crate floor drags the berries into it: /diagnostics
     turns WARN and names the berry, its depth and the bound, 0.2 of its radius (results/trust.py, the rule a run's
@@ -204,3 +215,98 @@ def test_diagnostics_warn_of_berries_pressed_past_any_contact_law(ros, tmp_path)
     assert deepest[2] == pytest.approx(named / 0.0135, rel=3e-3) and deepest[3] == 0.0  # named to 3 digits
     assert 0.12 < when < 0.3, said[2].message  # while it was lifted, before the diagnostics
     assert said[3].message == "bruising impacts"  # the next: the drop into the floor bruised them, nothing is deep
+
+
+def test_a_stamp_the_node_cannot_take_does_not_lock_out_the_inputs_after_it(ros):
+    """Lockstep: an input stamped 1e6 s is refused (the step is too long); the valid inputs after it used to be
+    rejected as going back before 1e6 s, and the node stayed stuck until a reset. Real time: an input stamped an hour
+    ahead was taken, and every correctly stamped one after it rejected while the stale acceleration was held."""
+    n = node(mode="lockstep")
+    try:
+        for t in (0.01, 0.02, 0.03):
+            accel(n, t, 1.0)
+        accel(n, 1e6, 2.0)
+        assert n.failures == 1 and n.solver.t == 0.03
+        for t in (0.04, 0.05):
+            accel(n, t, 3.0)
+        assert n.solver.t == 0.05 and n.rejected == 0 and n.accel[0] == 3.0
+    finally:
+        n.close()
+        n.destroy_node()
+    n = node(mode="realtime")
+    try:
+        now = n.get_clock().now().nanoseconds * 1e-9
+        accel(n, now + 3600.0, 2.0)
+        assert n.rejected == 1 and n.accel[0] == 0.0
+        accel(n, now + 0.001, 3.0)
+        assert n.rejected == 1 and n.accel[0] == 3.0
+    finally:
+        n.close()
+        n.destroy_node()
+
+
+def test_real_time_goes_on_when_the_clock_goes_back(ros):
+    """Under use_sim_time a /clock that restarts (a simulator reset) or is replayed goes back; the node used to wait,
+    publishing nothing and saying nothing, until the clock passed its old reading (hours after a reset). It now
+    goes on from where it is at the new clock, logs it and says it in /diagnostics (WARN)."""
+    n = node(mode="realtime", use_sim_time=True)
+    clock = n.get_clock()
+    diags = []
+    n.emit = lambda topic, m, ns: diags.append(m) if topic == "/diagnostics" else None
+    try:
+        for t in (1000.0, 1000.5):
+            clock.set_ros_time_override(Time(seconds=t))
+            n.on_tick()
+        assert n.solver.t == 0.5
+        for t in (500.0, 500.25):  # back: the run goes on from 0.5 s
+            clock.set_ros_time_override(Time(seconds=t))
+            n.on_tick()
+        assert n.solver.t == 0.75 and n.clock_jumps == 1
+        n.on_diagnostics()
+        status = diags[-1].status[0]
+        values = {kv.key: kv.value for kv in status.values}
+        assert status.level == 1 and "clock went back" in status.message and values["clock_jumps_back"] == "1"
+        n.on_diagnostics()  # said once
+        assert diags[-1].status[0].level == 0
+    finally:
+        n.close()
+        n.destroy_node()
+
+
+def test_a_burst_of_lockstep_inputs_is_answered_in_full(ros):
+    """A controller that streams its inputs without waiting for each answer: the node's input queue kept the last 100
+    of a burst, dropped the rest without a word, and two runs of the same inputs ended apart. Here 600 inputs
+    published at once (reliably) into a node that is not spinning yet must all be answered, in order."""
+    import rclpy.executors
+    from geometry_msgs.msg import AccelStamped
+    from sensor_msgs.msg import JointState
+
+    from .test_ros_node import QOS
+
+    n = node(mode="lockstep")
+    ctl = rclpy.create_node("burst_controller", namespace="/grape_cluster")
+    answered = []
+    ctl.create_subscription(JointState, "joint_states", lambda m: answered.append(m.header.stamp.nanosec), QOS)
+    pub = ctl.create_publisher(AccelStamped, "rachis/accel", QOS)
+    executor = rclpy.executors.SingleThreadedExecutor()
+    try:
+        for x in (n, ctl):
+            executor.add_node(x)
+        deadline = time.monotonic() + 20
+        while (pub.get_subscription_count() == 0 or n.count_publishers("/grape_cluster/rachis/accel") == 0) \
+                and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        for k in range(1, 601):
+            m = AccelStamped()
+            m.header.stamp.nanosec, m.header.frame_id, m.accel.linear.x = k * 1_000_000, "world", float(k % 7 - 3)
+            pub.publish(m)
+        while n.solver.t < 0.6 and time.monotonic() < deadline + 60:
+            executor.spin_once(timeout_sec=0.05)
+        assert n.solver.t == 0.6 and n.rejected == 0
+        for _ in range(40):
+            executor.spin_once(timeout_sec=0.02)
+        assert sorted(set(answered))[-600:] == [k * 1_000_000 for k in range(1, 601)]
+    finally:
+        executor.shutdown()
+        for x in (n, ctl):
+            x.destroy_node()

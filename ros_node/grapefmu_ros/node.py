@@ -21,6 +21,7 @@ import rclpy
 import rclpy.executors
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
 from rclpy.event_handler import PublisherEventCallbacks
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from scipy.spatial.transform import Rotation
@@ -63,6 +64,9 @@ PARAMETERS = [
 
 #: rad: a pose input this far from the simulated rachis' orientation is warned about
 ORIENTATION_WARNING = 0.1
+#: s: in real time, an input stamped further ahead of the node's clock is rejected: taken, it would make every input
+#: stamped right afterwards look older than it and be rejected (clocks of a robot's computers agree far closer)
+FUTURE_STAMP = 1.0
 
 
 def _difference(a: np.ndarray, b: np.ndarray, order: int) -> np.ndarray:
@@ -129,18 +133,21 @@ class SimulatorNode(Node):
         self.full_names = {t: pub.topic_name for t, pub in self.pubs.items()}  # as recordings name them
         for topic, handler in (("rachis/accel", self.on_accel), ("rachis/pose", self.on_pose),
                                ("rachis/twist", self.on_twist)):
-            self.create_subscription(message_class(msgs.topic_type(topic)), topic, handler, INPUT_QOS, raw=True)
+            self.create_subscription(message_class(msgs.topic_type(topic)), topic, handler, INPUT_QOS[self.mode],
+                                     raw=True)
         self.gripper_frame = gp("gripper_frame")
         self.rachis_frame = f"{self.prefix}rachis"
         #: a planar scene's rachis turns about its y axis only: this world direction (None: spherical berries only)
         self.plane_normal = m.plane_normal(self.scene.excitation)
         if self.gripper_frame:
-            self.create_subscription(message_class(msgs.topic_type("/tf")), "/tf", self.on_tf, INPUT_QOS, raw=True)
+            self.create_subscription(message_class(msgs.topic_type("/tf")), "/tf", self.on_tf, INPUT_QOS[self.mode],
+                                     raw=True)
         self.create_service(Trigger, "reset", self.on_reset)
         self.create_service(SetBool, "pause", self.on_pause)
         self.paused = False
         self.rejected = 0
         self.overruns = 0
+        self.clock_jumps = self._jumps_seen = 0  # times the node's clock went back (on_tick); of them, said
         self.tick_costs = collections.deque(maxlen=1000)  # s: the last ticks' wall time (diagnostics' percentiles)
         self.failures = 0
         self.deepest = None  # (pair, δ, bound, t) pressed deepest past its bound since the last diagnostics
@@ -164,6 +171,7 @@ class SimulatorNode(Node):
         clock0; the stamps' origin makes the newest state's stamp the clock's time. A clock at 0 (use_sim_time
         before the first /clock) is not yet running: the first tick that reads it running restarts from there."""
         self.clock0, self.sim0 = self.get_clock().now().nanoseconds, self.solver.t
+        self.last_clock = self.clock0
         self.origin = 0 if self.mode == "lockstep" else self.clock0 - to_ns(self.solver.t)
 
     def _sim_target(self, clock_ns: int) -> float:
@@ -324,13 +332,18 @@ class SimulatorNode(Node):
         if t_in < self.last_stamp:
             self._reject(what, f"stamp {t_in:.9f} s goes back before {self.last_stamp:.9f} s")
             return False
-        self.last_stamp = t_in
+        if self.mode == "realtime" and t_in > seconds(self.get_clock().now().nanoseconds) + FUTURE_STAMP:
+            self._reject(what, f"stamp {t_in:.9f} s is more than {FUTURE_STAMP:g} s ahead of the node's clock "
+                               f"({seconds(self.get_clock().now().nanoseconds):.9f} s): a clock set wrong, or another "
+                               "time base (use_sim_time)")
+            return False
         if self.mode == "lockstep" and not self.paused:
             if t_in > self.solver.t:
                 if not self.advance(t_in - self.solver.t):
-                    return False
+                    return False  # refused: the stamp is not taken, so the next input may still come before it
             else:
                 self.publish_state()  # an input at the current time still gets its answer
+        self.last_stamp = t_in
         if frame == "rachis":
             turn = Rotation.from_quat(self.solver.snapshot().base_orientation[0])
             a = (*turn.apply(a[:3]), *turn.apply(a[3:]))
@@ -432,6 +445,14 @@ class SimulatorNode(Node):
             if clock == 0:
                 return
             self._restart_clock()
+        elif clock < self.last_clock:  # /clock restarted or replayed, or the system clock set back
+            self.clock_jumps += 1
+            self.get_logger().warning(
+                f"the clock went back from {seconds(self.last_clock):.9f} s to {seconds(clock):.9f} s: real time goes "
+                f"on from simulated t = {self.solver.t:.6f} s at the new clock (call reset to start the scene again)",
+                throttle_duration_sec=1.0)
+            self._restart_clock()
+        self.last_clock = clock
         self.advance(self._sim_target(clock) - self.solver.t)
         self.tick_costs.append(time.monotonic() - now)
 
@@ -465,6 +486,7 @@ class SimulatorNode(Node):
         values = {
             "sim_time_s": f"{t:.6f}", "real_time_factor": f"{(t - sim_prev) / max(now - wall_prev, 1e-9):.4f}",
             "cpu_percent": f"{100 * (cpu - cpu_prev) / max(now - wall_prev, 1e-9):.1f}", "overruns": self.overruns,
+            "clock_jumps_back": self.clock_jumps,
             "rejected_inputs": self.rejected, "refused_steps": self.failures, **summary,
             **({} if math.isnan(self.orientation_offset) else
                {"gripper_orientation_offset_rad": f"{self.orientation_offset:.6f}"}),
@@ -474,11 +496,13 @@ class SimulatorNode(Node):
             **({f"tick_cost_ms_{k}": f"{1e3 * v:.3f}" for k, v in
                 zip(("p50", "p99", "max"), np.percentile(self.tick_costs, [50, 99, 100]))} if self.tick_costs else {}),
         }
-        warn = detach or bruising or self.rejected or self.failures or deep
+        jumped, self._jumps_seen = self.clock_jumps > self._jumps_seen, self.clock_jumps
+        warn = detach or bruising or self.rejected or self.failures or deep or jumped
         level = 2 if self.failures else (1 if warn else 0)
         msg = ("steps refused (the log says why)" if self.failures else
                overlap_words(self.scene.model, *deep) if deep else "detachment risk" if detach else
-               "bruising impacts" if bruising else "inputs rejected" if self.rejected else "ok")
+               "bruising impacts" if bruising else "inputs rejected" if self.rejected else
+               "the clock went back (the log says from when to when)" if jumped else "ok")
         self.emit(*msgs.diagnostics(self._stamp(t), level, msg, values), self._stamp(t))
 
     def close(self):
@@ -498,7 +522,11 @@ def main(args=None):
     if any(a in ("-h", "--help") for a in ours):
         print(usage())
         return
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    except RCLError as e:  # a --params-file that cannot be read or parsed, a malformed --ros-args
+        print(f"grapefmu_ros: error: ROS arguments: {str(e).splitlines()[0]}", file=sys.stderr)
+        raise SystemExit(2) from None
     stop = []
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda signum, _: stop.append(signal.Signals(signum).name))
@@ -515,7 +543,7 @@ def main(args=None):
             executor.spin_once(timeout_sec=0.05)
         print(f"grapefmu_ros: stopped by {stop[0]} at simulated t = {node.solver.t:.3f} s"
               f"{f'; {rec} is complete' if rec else ''}", file=sys.stderr, flush=True)
-    except GrapefmuError as e:
+    except (GrapefmuError, ParameterException) as e:  # ours, or rclpy's own (use_sim_time:=maybe)
         print(f"grapefmu_ros: error: {e}", file=sys.stderr)
         raise SystemExit(2) from None
     finally:
