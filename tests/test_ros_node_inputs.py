@@ -149,7 +149,8 @@ def test_real_time_under_use_sim_time_runs_on_the_clock_topic(ros, tmp_path):
 
 
 @pytest.mark.parametrize("value, words", [("rate_hz:=500", "parameter rate_hz"), ("rate_hz:=0.0", "from 1 to 10000"),
-                                          ("record:={tmp}", "parameter record: cannot write")])
+                                          ("record:={tmp}", "parameter record: cannot write"),
+                                          ("world_frame:=/map", "parameter world_frame: expected a TF frame name")])
 def test_a_bad_parameter_is_one_line_naming_it(tmp_path, value, words):
     """An integer for a floating-point parameter, a value outside its range or a recording path that is a directory:
     one line on stderr and exit 2, as a missing scene (they were tracebacks, exit 1)."""
@@ -310,3 +311,24 @@ def test_a_burst_of_lockstep_inputs_is_answered_in_full(ros):
         executor.shutdown()
         for x in (n, ctl):
             x.destroy_node()
+
+
+def test_the_fixed_frame_is_the_robots(ros):
+    """REP-105: a robot's fixed frame may be map or odom. `world` was written into the node: inputs in the robot's
+    fixed frame were rejected and the rachis could not hang from it. With world_frame := odom the inputs are taken
+    in odom (and no longer in world), and the rachis' transform, the markers and the applied inputs are in odom."""
+    n = node(mode="lockstep", world_frame="odom", marker_rate_hz=1000.0)
+    said = []
+    n.emit = lambda topic, m, ns: said.append((topic, m))
+    try:
+        for t, frame in ((0.01, "odom"), (0.02, "world"), (0.03, "")):
+            n.on_accel(serialize(msgs.accel(to_ns(t), (1.0, 0.0, 0.0, 0.0, 0.0, 0.0), frame=frame)[1]))
+        assert n.solver.t == 0.03 and n.rejected == 1
+        tf = [tr for topic, m in said if topic == "/tf" for tr in m.transforms]
+        assert tf and {tr.header.frame_id for tr in tf if tr.child_frame_id == "grape_cluster/rachis"} == {"odom"}
+        assert "world" not in {tr.header.frame_id for tr in tf}
+        assert {m.header.frame_id for topic, m in said if topic == "rachis/accel_applied"} == {"odom"}
+        assert {mk.header.frame_id for topic, m in said if topic == "markers" for mk in m.markers} == {"odom"}
+    finally:
+        n.close()
+        n.destroy_node()

@@ -57,8 +57,10 @@ PARAMETERS = [
      "the gripper's TF frame, Hz", (0.1, 1000),
      False),
     ("record", "", "MCAP file to record every topic to ('' for none)", None, True),
-    ("gripper_frame", "", "TF frame of the gripper holding the rachis, read on /tf as the transform world → it, "
-     "rotation included ('' for none: inputs come on rachis/accel, rachis/pose or rachis/twist)", None, True),
+    ("gripper_frame", "", "TF frame of the gripper holding the rachis, read on /tf as the transform world_frame → "
+     "it, rotation included ('' for none: inputs come on rachis/accel, rachis/pose or rachis/twist)", None, True),
+    ("world_frame", msgs.WORLD, "The fixed frame (REP-105: world, map or odom) the rachis moves in and the inputs "
+     "are given in; the node's own frames hang from it", None, True),
 ]
 
 
@@ -120,6 +122,11 @@ class SimulatorNode(Node):
         m = self.scene.model
         ns = self.get_namespace()
         self.prefix = "" if ns == "/" else ns.strip("/") + "/"  # of every TF frame
+        self.world = gp("world_frame")
+        if not (self.world and self.world[0] != "/" and all(c.isalnum() or c in "_/" for c in self.world)) or (
+                self.prefix and self.world.startswith(self.prefix)):
+            raise GrapefmuError(f"parameter world_frame: expected a TF frame name of letters, digits, _ and / (not "
+                                f"starting with / nor with the node's own {self.prefix!r}), got {self.world!r}")
         self.recorder = McapRecorder(gp("record"), metadata(self.scene, self.mode, self.rate, ns, Solver(
             self.scene, driven=True).integrator)) if gp("record") else None
         topics = ["joint_states", "pedicel_tension", *msgs.wrench_topics(m), "contacts", "summary", "collision_events",
@@ -221,9 +228,9 @@ class SimulatorNode(Node):
             self.get_logger().error(f"step of {dt:.6g} s refused: {e}", throttle_duration_sec=1.0)
             return False
         ns = self._stamp(self.solver.t)
-        self.emit(*msgs.accel(ns, self.accel, "rachis/accel_applied"), ns)
+        self.emit(*msgs.accel(ns, self.accel, "rachis/accel_applied", self.world), ns)
         if self.omega is not None:  # set at this interval's start, once
-            self.emit(*msgs.twist(ns, self.omega, "rachis/twist_applied"), ns)
+            self.emit(*msgs.twist(ns, self.omega, "rachis/twist_applied", self.world), ns)
             self.omega = None
         self.emit("sim_time", msgs.clock(to_ns(self.solver.t))[1], ns)  # what replay --check re-simulates
         self.publish_state()
@@ -246,7 +253,7 @@ class SimulatorNode(Node):
                 self.deepest = (*hit[1:], t)
         summary = msgs.summary_table(snap)
         for topic, m in msgs.state_messages(self.scene.model, snap, 0, ns, summary, markers=markers_due, tf=tf_due,
-                                            prefix=self.prefix):
+                                            prefix=self.prefix, world=self.world):
             self.emit(topic, m, ns)
         if "/clock" in self.pubs:
             self.emit(*msgs.clock(ns), ns)
@@ -272,11 +279,12 @@ class SimulatorNode(Node):
         self.get_logger().warning(f"{what}: {why}; rejected", throttle_duration_sec=1.0)
 
     def _frame(self, frame_id: str, what: str, allowed: tuple[str, ...]) -> str | None:
-        """`world` (also for an empty frame_id) or the rachis frame, if `allowed`; None (rejected) otherwise."""
-        frame = {"": "world", msgs.WORLD: "world", self.rachis_frame: "rachis"}.get(frame_id)
+        """"world": the fixed frame world_frame (also for an empty frame_id), or "rachis": the rachis frame, if
+        `allowed`; None (rejected) otherwise."""
+        frame = {"": "world", self.world: "world", self.rachis_frame: "rachis"}.get(frame_id)
         if frame not in allowed:
-            known = " or ".join(repr(f) for f in ((msgs.WORLD, self.rachis_frame) if "rachis" in allowed
-                                                 else (msgs.WORLD,)))
+            known = " or ".join(repr(f) for f in ((self.world, self.rachis_frame) if "rachis" in allowed
+                                                 else (self.world,)))
             self._reject(what, f"frame_id {frame_id!r}: expected {known} (the node looks up no other frame)")
             return None
         return frame
@@ -374,8 +382,8 @@ class SimulatorNode(Node):
             if tr.child_frame_id != self.gripper_frame:
                 continue
             what = f"/tf {self.gripper_frame}"
-            if tr.header.frame_id != msgs.WORLD:
-                self._reject(what, f"given in {tr.header.frame_id!r}; the node reads the transform {msgs.WORLD} → "
+            if tr.header.frame_id != self.world:
+                self._reject(what, f"given in {tr.header.frame_id!r}; the node reads the transform {self.world} → "
                                    f"{self.gripper_frame} only (it composes no TF chain: publish that transform, or "
                                    f"the gripper's pose on rachis/pose)")
                 continue

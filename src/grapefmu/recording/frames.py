@@ -52,10 +52,11 @@ def static_transforms(model: Model, prefix: str = PREFIX) -> list[tuple[str, str
             for name, h in zip(model.names, hinges(model))]
 
 
-def transforms(model: Model, snap: catalogue.Snapshot, k: int, prefix: str = PREFIX):
-    """(parent, child, translation, quaternion xyzw) of every moving transform at sample k."""
+def transforms(model: Model, snap: catalogue.Snapshot, k: int, prefix: str = PREFIX, world: str = WORLD):
+    """(parent, child, translation, quaternion xyzw) of every moving transform at sample k, the rachis' in the fixed
+    frame `world`."""
     q = snap.base_orientation[k]
-    out = [(WORLD, rachis(prefix), np.array(snap.base_displacement[k], dtype=float), q / np.linalg.norm(q))]
+    out = [(world, rachis(prefix), np.array(snap.base_displacement[k], dtype=float), q / np.linalg.norm(q))]
     p = snap.observation.position[k]
     q = quaternion_z_to(hinges(model) - p)
     out += [(rachis(prefix), f"{prefix}{name}", p[i], q[i]) for i, name in enumerate(model.names)]

@@ -134,9 +134,11 @@ def summary_table(snap: catalogue.Snapshot) -> np.ndarray:
 
 
 def state_messages(model: Model, snap: catalogue.Snapshot, k: int, ns: int, summary: np.ndarray, *,
-                   markers: bool = False, tf: bool = True, prefix: str = frames.PREFIX) -> list:
+                   markers: bool = False, tf: bool = True, prefix: str = frames.PREFIX,
+                   world: str = frames.WORLD) -> list:
     """(topic, message) of every state topic at sample k of snap, stamped ns; `summary` is summary_table(snap).
-    Markers and /tf only when asked: a 3D view needs far fewer of them than the state topics' rate."""
+    Markers and /tf only when asked: a 3D view needs far fewer of them than the state topics' rate. `world`: the
+    fixed frame they are placed in."""
     obs = snap.observation
     dof_joints = [f"twig_{n}" for n in model.dof_names]
     out = [("joint_states", msg("sensor_msgs/msg/JointState", header=header(ns, frames.rachis(prefix)), name=dof_joints,
@@ -154,9 +156,9 @@ def state_messages(model: Model, snap: catalogue.Snapshot, k: int, ns: int, summ
     out.append(("summary", _summary(ns, frames.rachis(prefix), summary[k])))
     if tf:
         out.append(("/tf", msg("tf2_msgs/msg/TFMessage", transforms=[
-            _transform(ns, *t) for t in frames.transforms(model, snap, k, prefix)])))
+            _transform(ns, *t) for t in frames.transforms(model, snap, k, prefix, world)])))
     if markers:
-        out.append(("markers", marker_array(model, snap, k, ns)))
+        out.append(("markers", marker_array(model, snap, k, ns, world=world)))
     return out
 
 
@@ -198,8 +200,9 @@ def impact_messages(model: Model, impacts: Impacts, origin: int = 0, prefix: str
     return out
 
 
-def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_scale: float = 0.02):
-    """Rachis (origin to every hinge), twigs, berries and contact-force lines in the world frame (z up) for
+def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_scale: float = 0.02,
+                 world: str = frames.WORLD):
+    """Rachis (origin to every hinge), twigs, berries and contact-force lines in the fixed frame `world` (z up) for
     Foxglove or RViz: three line lists plus one sphere per berry, however many pairs the cluster has."""
     M = model.arrays
     rachis = np.column_stack([M.berry["hinge_x"], M.berry["hinge_y"], M.berry["hinge_z"]])
@@ -209,7 +212,7 @@ def marker_array(model: Model, snap: catalogue.Snapshot, k: int, ns: int, force_
     berries = catalogue.world(frame, snap.observation.position[k: k + 1])[0]
 
     def marker(mid, mtype, ns_, scale, color, points=(), pose=None):
-        return msg("visualization_msgs/msg/Marker", header=header(ns, WORLD), ns=ns_, id=mid, type=mtype, action=0,
+        return msg("visualization_msgs/msg/Marker", header=header(ns, world), ns=ns_, id=mid, type=mtype, action=0,
                    pose=pose or {"orientation": {"w": 1.0}}, scale=scale, color=color,
                    points=[_vector(p) for p in points])
     line = 5  # LINE_LIST
