@@ -332,3 +332,23 @@ def test_the_fixed_frame_is_the_robots(ros):
     finally:
         n.close()
         n.destroy_node()
+
+
+def test_each_reason_for_a_rejection_is_logged_once_a_second(ros):
+    """Rejections were throttled to one line a second whatever their reason, so a flood of NaN inputs hid a
+    too-large acceleration behind it (found by an audit). Each reason now has its own line once a second, naming
+    the values (the NaN's too); all are counted."""
+    import types
+
+    n = node(mode="lockstep")
+    said = []
+    n.get_logger = lambda: types.SimpleNamespace(warning=lambda m, **_: said.append(m), error=said.append)
+    try:
+        for t, ax in ((0.01, float("nan")), (0.02, float("nan")), (0.03, 5e3), (0.04, float("nan")), (0.05, 6e3)):
+            accel(n, t, ax)
+        assert n.rejected == 5 and len(said) == 2, said
+        assert "values must be finite, got (a, α) = (nan, 0.0, 0.0, 0.0, 0.0, 0.0)" in said[0]
+        assert "linear acceleration |a| = 5000 m/s² above max_accel" in said[1]
+    finally:
+        n.close()
+        n.destroy_node()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import collections
 import math
+import re
 import time
 
 import numpy as np
@@ -66,6 +67,8 @@ PARAMETERS = [
 
 #: rad: a pose input this far from the simulated rachis' orientation is warned about
 ORIENTATION_WARNING = 0.1
+#: a number in a message (a value, a stamp), left out of the reason a rejection is throttled by
+_NUMBER = re.compile(r"[-+]?(?:\d[\d.]*(?:e[-+]?\d+)?|nan|inf)")
 #: s: in real time, an input stamped further ahead of the node's clock is rejected: taken, it would make every input
 #: stamped right afterwards look older than it and be rejected (clocks of a robot's computers agree far closer)
 FUTURE_STAMP = 1.0
@@ -153,6 +156,7 @@ class SimulatorNode(Node):
         self.create_service(SetBool, "pause", self.on_pause)
         self.paused = False
         self.rejected = 0
+        self._said: dict[str, float] = {}  # a rejection's reason -> when it was last logged (_reject)
         self.overruns = 0
         self.clock_jumps = self._jumps_seen = 0  # times the node's clock went back (on_tick); of them, said
         self.tick_costs = collections.deque(maxlen=1000)  # s: the last ticks' wall time (diagnostics' percentiles)
@@ -275,8 +279,16 @@ class SimulatorNode(Node):
 
     # --- inputs ---------------------------------------------------------------------------------
     def _reject(self, what: str, why: str) -> None:
+        """Count and log a rejected input: at most once a second for each topic and reason (the numbers in it aside),
+        so that one reason's flood does not hide another's (rclpy's throttle is one per call site: this one)."""
         self.rejected += 1
-        self.get_logger().warning(f"{what}: {why}; rejected", throttle_duration_sec=1.0)
+        key = f"{what}: {_NUMBER.sub('#', why)}"
+        now = time.monotonic()
+        if now - self._said.get(key, -math.inf) >= 1.0:
+            if len(self._said) > 100:
+                self._said.clear()
+            self._said[key] = now
+            self.get_logger().warning(f"{what}: {why}; rejected")
 
     def _frame(self, frame_id: str, what: str, allowed: tuple[str, ...]) -> str | None:
         """"world": the fixed frame world_frame (also for an empty frame_id), or "rachis": the rachis frame, if
@@ -297,7 +309,7 @@ class SimulatorNode(Node):
         bound, angular_bound = self.get_parameter("max_accel").value, self.get_parameter("max_angular_accel").value
         axis = self.plane_normal if self.plane_normal is None or frame == "world" else (0.0, 1.0, 0.0)
         if not all(math.isfinite(v) for v in (*a, *w)):
-            why = "values must be finite"
+            why = f"values must be finite, got (a, α) = {tuple(a)}" + ("" if omega is None else f", ω = {tuple(w)}")
         elif lin > bound:
             why = f"linear acceleration |a| = {lin:.6g} m/s² above max_accel = {bound:g}"
         elif ang > angular_bound:
@@ -418,7 +430,8 @@ class SimulatorNode(Node):
         first-order low-pass at pose_filter_hz. Turns are differenced as rotation vectors in the world frame.
         False if the input was rejected."""
         if not np.all(np.isfinite(x)):
-            self._reject(what, "values must be finite")
+            names = "position, orientation" if order == 2 else "linear, angular"
+            self._reject(what, f"values must be finite, got {names} = {tuple(x.tolist())}")
             return False
         seen = (self._motion[order] + [(t, x)])[-(order + 1):]
         omega = tuple(x[3:]) if order == 1 else None
