@@ -470,3 +470,18 @@ def test_intervals_that_share_a_stamp_end_at_their_own_sim_times(tmp_path):
     _real_time_copy(path, 800_000_000, lambda at: [], back=(600_000_000, 200_000_000))
     r = check(path)
     assert r.ok and r.max_deviation == 0.0 and r.compared == 800
+
+
+def test_an_empty_file_and_a_damaged_end_magic_are_said_as_they_are(recordings, tmp_path):
+    """An empty file was 'read up to the last complete record, which ends at byte 8' (of 0), and a file whose last
+    bytes, its end magic, were damaged was said to be damaged 'not at the end of the file' (found by an audit)."""
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    with pytest.raises(GrapefmuError, match="ends abruptly at byte 0, .*; no record in it"):
+        check(empty)
+    data = bytearray(recordings["cli"].read_bytes())
+    data[-3] ^= 0x10
+    damaged = tmp_path / "magic.mcap"
+    damaged.write_bytes(bytes(data))
+    with pytest.raises(CorruptRecording, match=r"corrupted \(its end magic is damaged\)"):
+        check(damaged)

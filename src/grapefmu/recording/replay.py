@@ -197,11 +197,13 @@ def _scan(path: Path, fh, size: int, rec: Recording, topics: set[str] | None) ->
                                f"(stored {e.expected:#010x}, computed {e.actual:#010x}); corrupted") from None
     except Exception as e:  # noqa: BLE001 - mcap raises many types on a torn end or garbage: classified here
         if not complete and fh.tell() >= size and isinstance(e, (EndOfFile, struct.error, UnicodeDecodeError)):
+            got = (f"read up to the last complete record, which ends at byte {at}: {counts['messages']} messages, "
+                   f"logged up to {_t(counts['last'])}") if at < size else "no record in it"
             rec.truncated = (f"{path} ends abruptly at byte {size}, without summary and footer (truncated: the writer "
-                             f"did not finish it, probably killed); read up to the last complete record, which ends "
-                             f"at byte {at}: {counts['messages']} messages, logged up to {_t(counts['last'])}")
+                             f"did not finish it, probably killed); {got}")
             return
         why = ("the file has its end magic, so it is not merely cut short" if complete else
+               "its end magic is damaged" if at + 8 >= size else
                "it is not at the end of the file, where a killed writer would leave a torn record")
         raise CorruptRecording(f"{path}: the record at byte {at} cannot be read ({type(e).__name__}: {e}); "
                                f"corrupted ({why})") from None
