@@ -515,7 +515,7 @@ def build_parser() -> argparse.ArgumentParser:
     o.set_defaults(func=cmd_outputs)
     be = command("bench", "Maintainers regenerate the committed report with --out docs/benchmarks.md --plots "
                           "docs/bench (README.md, Maintainers).")
-    be.add_argument("--quick", action="store_true", help="two scenes, few settings (seconds)")
+    be.add_argument("--quick", action="store_true", help="two scenes, few settings (minutes on 2 cores)")
     be.add_argument("--scale", action="store_true", help="cost against the number of berries, N = 2 … 300 "
                                                           "(rewrites only its own section of the report)")
     be.add_argument("--out", default="out/bench/benchmarks.md", metavar="FILE", help="the Markdown report to write")
