@@ -245,6 +245,8 @@ def test_a_measured_gripper_acceleration_beyond_the_faces_bound_is_refused(tmp_p
     ("time_s,angle_left_deg,angle_right_rad", ["angle_left_deg", "radians", "angle_left_rad"]),
     ("time_s,angle_middle_rad,angle_right_rad", ["angle_middle_rad", "no angle 'middle'", "angle_left_rad"]),
     ("time_s,x,y", ["no angle column", "angle_left_rad, angle_right_rad"]),
+    # the last copy won without a word, and the measured one was thrown away (found by an audit)
+    ("time_s,angle_left_rad,angle_left_rad", ["column angle_left_rad appears 2 times", "(columns 2, 3)"]),
 ])
 def test_bad_headers_name_the_column(tmp_path, header, words):
     with pytest.raises(DataError) as e:

@@ -227,6 +227,18 @@ def test_a_plan_the_scene_validator_refuses_is_one_line_before_any_run(plans, tm
     assert not (tmp_path / "out").exists()
 
 
+def test_a_range_beyond_what_the_plan_takes_is_refused_before_any_run(plans, tmp_path):
+    """--range thresholds.bruise_force=1:1e5 ran: the draws above the scene's 1e4 N were refused and left out, the least
+    likely to bruise, so P(bruise) came out biased high (found by an audit). Both ends are now checked against
+    every plan."""
+    with pytest.raises(grapefmu.GrapefmuError, match=r"--range thresholds.bruise_force=1:100000: plan .*plan_fast.toml "
+                                                     r"refuses 100000 \(thresholds.bruise_force: expected a number in "
+                                                     r"\(0, 10000\] N"):
+        assess(plans, distribution(tomllib.loads(plans[0].read_text()), None, ["thresholds.bruise_force=1:1e5"]), 3,
+               1, tmp_path / "out", workers=0, progress=False)
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("change", [lambda d: d["covariance_u"][0].__setitem__(0, "x"),
                                     lambda d: d["covariance_u"][0].__setitem__(0, [1]),
                                     lambda d: d["parameters"][0].__setitem__("u", 1e300)])

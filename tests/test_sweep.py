@@ -137,9 +137,53 @@ def test_each_row_carries_the_warnings_of_its_run(folder):
     (("values = [1500.0, 3000.0]", 'distribution = "grid"\nvalues = [1500.0, 3000.0]'),
      "parameters[0].distribution"),  # a grid has no distribution, and took "grid"
     (('key = "contact.stiffness"', 'key = "berries[0].hinge_damping"'), "parameters"),  # and berries[*]: one value
+    # keys a mode or distribution does not read were silently ignored (found by an audit)
+    (("values = [1500.0, 3000.0]", "values = [1500.0, 3000.0]\nlow = 1.0"), "parameters[0].low"),
 ])
 def test_bad_spec_names_the_field(folder, change, field):
     (folder / "bad.toml").write_text(GRID.replace(*change))
     with pytest.raises(SceneError) as e:
         load_spec(folder / "bad.toml")
     assert e.value.key == field
+
+
+@pytest.mark.parametrize("change, field, words", [
+    (("low = 1000.0", "low = 1000.0\nmean = 2000.0"), "parameters[0].mean", "distribution 'uniform' does not read it"),
+    (('distribution = "uniform"', 'shared = true\ndistribution = "uniform"'), "parameters[0].shared",
+     "has none"),
+])
+def test_a_monte_carlo_key_its_distribution_does_not_read_is_refused(folder, change, field, words):
+    (folder / "bad.toml").write_text(MC.replace(*change))
+    with pytest.raises(SceneError, match=words) as e:
+        load_spec(folder / "bad.toml")
+    assert e.value.key == field
+
+
+def test_a_base_scene_every_run_would_refuse_is_refused_before_any_run(folder, capsys):
+    """A typo in the base scene made every run a row saying so, and the command exited 0. Refused up front when the
+    first, middle and last run are refused alike on a key no parameter sets; an error on a swept key is left to the
+    runs (another value may be fine)."""
+    row = (folder / "row.toml").read_text()
+    (folder / "row.toml").write_text(row.replace("gravity =", "gravty = 9.81\ngravity ="))
+    with pytest.raises(SceneError, match="unknown key.*in the base scene row.toml, which no parameter changes") as e:
+        load_spec(folder / "grid.toml")
+    assert e.value.key == "gravty"
+    (folder / "row.toml").write_text(row.replace("\nstiffness = 2000.0", "\nstiffness = -1.0"))
+    assert load_spec(folder / "grid.toml").parameters[0].key == "contact.stiffness"  # swept: every run sets it
+
+
+def test_a_run_that_fails_in_an_unexpected_way_is_a_row_and_no_run_finished_is_a_failure(folder, capsys):
+    """A run raising something other than grapefmu's errors (a NUL in a file name: ValueError) ended the sweep with
+    a traceback, and every resume crashed again. It is now its run's row, the file name is refused by the scene's
+    own check, and a sweep with no run finished exits 1 (it exited 0)."""
+    (folder / "nul.toml").write_text('scene = "row.toml"\nmode = "grid"\n\n[[parameters]]\nkey = "contact.stiffness"'
+                                     '\nvalues = [-1.0, -2.0]\n')
+    assert main(["sweep", str(folder / "nul.toml"), "-o", str(folder / "nul.parquet"), "--workers", "1"]) == 1
+    table = pq.read_table(folder / "nul.parquet").to_pylist()
+    assert [r["status"].split(":")[0] for r in table] == ["error", "error"]
+    assert "no run finished (2 refused or failed" in capsys.readouterr().err
+    from grapefmu.sweep.worker import run_one
+    doc = tomllib.loads((folder / "row.toml").read_text())
+    doc["excitation"] = {"kind": "csv", "file": "bad\x00name.csv"}
+    row = run_one(0, doc, str(folder))
+    assert row["status"].startswith("error: excitation.file: ") and "NUL" in row["status"], row["status"]

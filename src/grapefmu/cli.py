@@ -204,6 +204,12 @@ def cmd_sweep(a: argparse.Namespace) -> int:
                   "no run had finished; run the same command again to start over")
         raise
     print(f"wrote {out}")
+    import pyarrow.parquet as pq
+    status = pq.read_table(out, columns=["status"]).column("status").to_pylist()
+    if "ok" not in status:  # a table of refusals: written, so that each says why, but not a sweep that ran
+        print(f"grapefmu sweep: no run finished ({len(status)} refused or failed; the first: {status[0]})",
+              file=sys.stderr)
+        return FAILURE
     return 0
 
 

@@ -87,6 +87,11 @@ def read_measured(path: str | Path, model: Model) -> Measured:
     header = [h.strip() for h in numbered[0][1]]
     body, lines = [r for _, r in numbered[1:]], [n for n, _ in numbered[1:]]
     where = {h: k for k, h in enumerate(header)}
+    twice = next((h for h in where if h and header.count(h) > 1), None)
+    if twice:  # which copy is the measurement? (the last one silently won)
+        cols = [k + 1 for k, h in enumerate(header) if h == twice]
+        raise DataError(f"{path}: column {twice} appears {len(cols)} times in the header (columns "
+                        f"{', '.join(map(str, cols))}); keep one")
     tcol = time_column()
     if tcol not in where:
         raise DataError(f"{path}: no {tcol} column in the header {', '.join(header[:8])}; expected {tcol}, "

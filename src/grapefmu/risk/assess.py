@@ -49,6 +49,15 @@ def check_plans(plans: list[str | Path], dist: Distribution) -> None:
             par = parameter(key, doc, str(p), drawn=True)
             if par.unit != unit:
                 raise GrapefmuError(f"{p}: {key} is drawn in {unit}; this plan's contact law takes {par.unit}")
+        for r in dist.ranges:  # both ends in what the plan takes (the draws beyond were refused, and left out)
+            for end in (r.low, r.high):
+                at = copy.deepcopy(doc)
+                r.parameter.set(at, end)
+                try:
+                    scene_from_dict(at, Path(p).parent)
+                except SceneError as e:
+                    raise GrapefmuError(f"--range {r.parameter.key}={r.low:g}:{r.high:g}: plan {p} refuses {end:g} "
+                                        f"({e}); every draw must be a value it takes") from None
 
 
 def assess(plans: list[str | Path], dist: Distribution, samples: int, seed: int, out_dir: str | Path, *,

@@ -69,6 +69,8 @@ def read_text(path: str | Path, what: str = "scene file", key: str | None = None
             data = fh.read(MAX_FILE_BYTES + 1)
     except OSError as e:
         raise refused(f"cannot read {what}: {e.strerror or e}") from None
+    except ValueError:  # a NUL in the path, which no file name holds
+        raise refused(f"cannot read {what}: a file name holds no NUL character") from None
     if len(data) > MAX_FILE_BYTES:
         raise refused(f"a {what} of at most {MAX_FILE_BYTES // 2**20} MiB is expected; this one is larger")
     try:

@@ -106,7 +106,32 @@ def load_spec(path: str | Path) -> SweepSpec:
     samples = v.integer("samples", doc.get("samples", 100), 1, MAX_RUNS)  # checked in any mode: a grid ignores it
     samples = samples if mode == "monte-carlo" else 0
     seed = v.integer("seed", doc.get("seed", 1), 0, 2**63 - 1)
-    return checked(SweepSpec(base, scene_path.parent, mode, params, samples, seed, text + "\n---\n" + scene_text))
+    spec = checked(SweepSpec(base, scene_path.parent, mode, params, samples, seed, text + "\n---\n" + scene_text))
+    _refuse_what_no_run_changes(spec, doc["scene"])
+    return spec
+
+
+def _refuse_what_no_run_changes(spec: SweepSpec, scene: str) -> None:
+    """A base scene the validator refuses alike in the first, middle and last run, on a key no parameter sets (a
+    typo, a value out of range): every run would be refused, so the sweep is, before any runs (it ran them all, each
+    a row saying so, and exited 0). An error that depends on what is swept differs between the runs, or names a
+    swept key, and is left to the runs."""
+    from ..scenefile import scene_from_dict
+
+    runs = spec.runs()
+    said = set()
+    for k in sorted({0, len(runs) // 2, len(runs) - 1}):
+        try:
+            scene_from_dict(scene_doc(spec, runs[k]), spec.base_dir)
+            return
+        except SceneError as e:
+            said.add((e.key, str(e)))
+    if len(said) == 1:
+        key, why = said.pop()
+        swept = [re.compile(re.escape(p.key).replace(r"\[\*\]", r"\[\d+\]") + r"(?:$|[.\[])") for p in spec.parameters]
+        if not any(r.match(key) for r in swept):
+            raise SceneError(key, f"{why[len(key) + 2:]} (in the base scene {scene}, which no parameter changes: every "
+                                  "run would be refused)")
 
 
 def same_value(doc: dict, keys: list[str], where: str = "parameters") -> None:
@@ -156,9 +181,13 @@ def _parameter(key: str, raw: Any, mode: str, base: dict) -> Parameter:
         if "shared" in raw:
             raise SceneError(f"{key}.shared", f"a {mode} sweep sets every element of a [*] key to each value; "
                                               "shared is for monte-carlo")
+        _takes_only(key, raw, {"key", "values"}, f"a {mode} sweep")
         return Parameter(path, _values(f"{key}.values", raw.get("values")))
     dist = v.choice(f"{key}.distribution", raw.get("distribution"), ("uniform", "normal", "choice"))
+    _takes_only(key, raw, {"key", "distribution", "shared", *DISTRIBUTION_KEYS[dist]}, f"distribution {dist!r}")
     shared = v.boolean(f"{key}.shared", raw.get("shared", False))
+    if "shared" in raw and "[*]" not in path:
+        raise SceneError(f"{key}.shared", f"shared draws one value for every element of a [*] key; {path!r} has none")
     each = count if "[*]" in path and not shared else 0
     if dist == "choice":
         return Parameter(path, _values(f"{key}.values", raw.get("values")), "choice", each=each)
@@ -168,6 +197,18 @@ def _parameter(key: str, raw: Any, mode: str, base: dict) -> Parameter:
         return Parameter(path, (), "uniform", lo, hi, each)
     return Parameter(path, (), "normal", v.number(f"{key}.mean", raw.get("mean"), -1e12, 1e12),
                      v.number(f"{key}.sd", raw.get("sd"), 0.0, 1e12), each)
+
+
+#: what each distribution is drawn from
+DISTRIBUTION_KEYS = {"uniform": ("low", "high"), "normal": ("mean", "sd"), "choice": ("values",)}
+
+
+def _takes_only(key: str, raw: dict, allowed: set[str], what: str) -> None:
+    """Refuse a parameter's key its mode or distribution does not read (it was silently ignored: low and high in a
+    grid, mean and sd in a uniform draw)."""
+    extra = sorted(set(raw) - allowed)
+    if extra:
+        raise SceneError(f"{key}.{extra[0]}", f"{what} does not read it (it takes {', '.join(sorted(allowed))})")
 
 
 def _values(key: str, raw: Any) -> tuple[Any, ...]:

@@ -33,9 +33,10 @@ def run_one(run_id: int, doc: dict[str, Any], base_dir: str) -> dict[str, Any]:
         compile_s = prepare(scene, say=False).seconds  # 0 after this worker's first run
         wall = time.perf_counter()
         run = simulate(scene)
-    except GrapefmuError as e:
+    except Exception as e:  # noqa: BLE001 - ours says why; anything else is a bug, kept in its row, not the sweep's end
+        why = str(e) if isinstance(e, GrapefmuError) else f"{type(e).__name__}: {e} (a grapefmu bug: please report it)"
         row.update({c: None for c in RESULT_COLUMNS})
-        row.update(status=f"error: {e}", wall_time_s=time.perf_counter() - wall, compile_time_s=compile_s)
+        row.update(status=f"error: {why}", wall_time_s=time.perf_counter() - wall, compile_time_s=compile_s)
         return row
     s = run.summary()
     row.update({"status": "ok", **{col: s[col] for col in SUMMARY_COLUMNS},
