@@ -352,10 +352,10 @@ class SimulatorNode(Node):
         if t_in < self.last_stamp:
             self._reject(what, f"stamp {t_in:.9f} s goes back before {self.last_stamp:.9f} s")
             return False
-        if self.mode == "realtime" and t_in > seconds(self.get_clock().now().nanoseconds) + FUTURE_STAMP:
+        now = seconds(self.get_clock().now().nanoseconds) if self.mode == "realtime" else math.inf
+        if t_in > now + FUTURE_STAMP:
             self._reject(what, f"stamp {t_in:.9f} s is more than {FUTURE_STAMP:g} s ahead of the node's clock "
-                               f"({seconds(self.get_clock().now().nanoseconds):.9f} s): a clock set wrong, or another "
-                               "time base (use_sim_time)")
+                               f"({now:.9f} s): a clock set wrong, or another time base (use_sim_time)")
             return False
         if self.mode == "lockstep" and not self.paused:
             if t_in > self.solver.t:

@@ -74,7 +74,8 @@ def check_claims(r: dict[str, Run]) -> list[Claim]:
     out.append(Claim("Vibration–collision coupling shortens the period and lowers the amplitude versus pure "
                      "vibration (test 3 vs test 4)",
                      f"time between successive maxima of one berry while they collide (to {colliding:.2f} s) "
-                     f"{p3 * 1e3:.1f} ms vs {p4 * 1e3:.1f} ms; time between collisions (the vibration–collision cycle) {cycle * 1e3:.1f} ms, "
+                     f"{p3 * 1e3:.1f} ms vs {p4 * 1e3:.1f} ms; time between collisions (the vibration–collision "
+                     f"cycle) {cycle * 1e3:.1f} ms, "
                      f"{100 * (1 - cycle / p4):.0f} % shorter than the free period; largest |angle| after 0.5 s "
                      f"{np.degrees(a3):.1f}° vs {np.degrees(a4):.1f}°",
                      verdict(p3 < 0.99 * p4, a3 < a4)))
