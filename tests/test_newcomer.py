@@ -476,6 +476,28 @@ def test_plot_legends_sit_beside_their_panels_and_clusters_have_a_colour_bar(ber
     plt.close(fig)
 
 
+def test_the_line_figure_draws_every_angle_under_its_own_name():
+    """A spherical berry has two angles: the line figure drew the first N angle columns under the N berries' names
+    (b001's line was b000's tilt) and left the other N out. A cluster's pairs that never pushed each took a line and a
+    legend entry, which squeezed the panels until the legends overlapped; and the angular accelerations shared the
+    m/s² axis (found by an audit)."""
+    from grapefmu.results.plot import figure, pyplot
+    run = _run_for_plot(6)
+    m = run.scene.model
+    fig = figure(run)
+    angles = fig.axes[0].get_lines()
+    assert [x.get_label() for x in angles] == m.dof_names and len(angles) == 12
+    for k, line in enumerate(angles):
+        np.testing.assert_array_equal(line.get_ydata(), np.degrees(run.angles[:, k]))
+    forces = [x.get_label() for x in fig.axes[1].get_lines() if not x.get_label().startswith(("bruise", "_"))]
+    pushed = [m.pair_name(p) for p in range(len(m.pairs)) if np.any(run.contact_force[:, p] > 0.0)]
+    assert forces[:len(pushed)] == pushed and forces[len(pushed):] == (
+        [f"{len(m.pairs) - len(pushed)} pairs never pushing (not drawn)"] if len(pushed) < len(m.pairs) else [])
+    assert all(ax.get_ylabel() != "rachis accel (m/s²)" or not any(x.get_label().startswith("alpha")
+                                                                      for x in ax.get_lines()) for ax in fig.axes)
+    pyplot().close(fig)
+
+
 def test_doc_links_and_named_paths_exist():
     """Relative links in docs/ (docs/bench/scale.md linked a missing bench/scale.png) and the repository paths
     the docs name in backticks (docs/scenes.md named grapefmu/scenefile/parse.py, which is under src/)."""

@@ -70,12 +70,15 @@ def _lines_figure(run: Run):
     rows = 6 if m.obstacles else 5
     fig, ax = plt.subplots(rows, 1, figsize=(9, 11 + 2 * (rows - 5)), sharex=True, constrained_layout=True)
     t = run.t
-    for i, name in enumerate(m.names):
-        ax[0].plot(t, np.degrees(run.angles[:, i]), label=name)
+    for k, name in enumerate(m.dof_names):  # a spherical berry's swing and tilt each: one line per angle
+        ax[0].plot(t, np.degrees(run.angles[:, k]), label=name)
     ax[0].set_ylabel("twig angle (deg; files: rad)")
     _legend(ax[0])
-    for p in range(len(m.pairs)):
+    touched = [p for p in range(len(m.pairs)) if np.any(run.contact_force[:, p] > 0.0)]
+    for p in touched:  # a line and a legend entry for each of a cluster's idle pairs hid the ones that touched
         ax[1].plot(t, run.contact_force[:, p], label=m.pair_name(p))
+    if len(touched) < len(m.pairs):
+        ax[1].plot([], [], " ", label=f"{len(m.pairs) - len(touched)} pairs never pushing (not drawn)")
     for k, onset in enumerate(run.impacts.onset):
         ax[1].axvline(onset, color="0.85", lw=0.6, zorder=0)
     ax[1].axhline(th.bruise_force, color="r", ls="--", lw=0.8, label=f"bruise {th.bruise_force:g} N")
@@ -94,9 +97,7 @@ def _lines_figure(run: Run):
     ax[3].set_ylabel("energy (J)")
     _legend(ax[3])
     _accel(ax[4], t, run.accel)
-    ax[4].set_ylabel("rachis accel (m/s²)")
     ax[4].set_xlabel("time (s)")
-    _legend(ax[4])
     if m.obstacles:
         _impacts_by_surface(run, ax[5])
     return fig
@@ -175,17 +176,24 @@ def _cluster_figure(run: Run):
     _legend(ax)
     ax = fig.add_subplot(grid[3, 1])
     _accel(ax, t, run.accel)
-    ax.set_ylabel("rachis accel (m/s²)")
     ax.set_xlabel("time (s)")
-    _legend(ax)
     if obstacles:
         _impacts_by_surface(run, fig.add_subplot(grid[4, :]))
     return fig
 
 
 def _accel(ax, t, accel) -> None:
-    """The rachis acceleration's components that are ever non-zero (a_x and a_z always)."""
+    """The rachis acceleration's components that are ever non-zero (a_x and a_z always), the angular ones on an axis
+    of their own (rad/s², dashed), and one legend for both."""
     from ..physics.excitation import ACCEL_COMPONENTS
+    turn = None
     for k, name in enumerate(ACCEL_COMPONENTS):
         if k in (0, 2) or np.any(accel[:, k]):
-            ax.plot(t, accel[:, k], label=name + (" (rad/s²)" if k >= 3 else ""))
+            if k >= 3 and turn is None:
+                turn = ax.twinx()
+                turn.set_ylabel("rachis angular accel (rad/s²)")
+            (turn if k >= 3 else ax).plot(t, accel[:, k], label=name, color=f"C{k}", ls="--" if k >= 3 else "-")
+    ax.set_ylabel("rachis accel (m/s²)")
+    lines = ax.get_lines() + (turn.get_lines() if turn is not None else [])
+    ax.legend(lines, [x.get_label() for x in lines], loc="upper left", bbox_to_anchor=(1.12 if turn else 1.01, 1.0),
+              borderaxespad=0.0, fontsize=8)

@@ -152,7 +152,8 @@ class Run:
 
     # --- summary --------------------------------------------------------------------------------
     def dissipated_per_berry(self) -> np.ndarray:
-        """Energy each berry dissipated (J): its hinge, plus half of every contact and coupling it is in."""
+        """Energy each berry dissipated (J): its hinge, half of every coupling and contact with another berry it is in,
+        and the whole of every contact with an obstacle (which takes no share): the shares add up to the total."""
         m = self.scene.model
         lay = self.layout
         out = self.y[-1, lay.d_hinge].copy()
