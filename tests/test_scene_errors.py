@@ -8,7 +8,7 @@ from dataclasses import replace
 
 import pytest
 
-from grapefmu import SceneError, Solver, simulate
+from grapefmu import SceneError, Solver, SolverError, simulate
 from grapefmu.model.model import ContactPair, Coupling, Obstacle
 from grapefmu.scenefile import parse_scene
 
@@ -247,3 +247,21 @@ def test_scene_built_in_code_carries_toml_that_loads_back_to_the_same_model():
     again = parse_scene(sc.source)
     assert again.model == sc.model and again.angles == sc.angles
     assert (again.excitation.arrays.table == sc.excitation.arrays.table).all()
+
+
+@pytest.mark.parametrize("times", [("0", "5e-324", "1e-323"), ("0", "1e160")])
+def test_pose_table_times_no_spline_can_follow_are_refused(times):
+    """Steps of 1e-323 s raised scipy's ValueError from the spline, and a table spanning 1e160 s one from the turn's
+    rotation vectors: tracebacks (found by fuzzing scene files). Now the key and why."""
+    rows = "".join(f"{t},{0.001 * k},0,0,0,0,0\n" for k, t in enumerate(times))
+    doc = dual(excitation={"kind": "pose-table", "text": "time,x,y,z,roll,pitch,yaw\n" + rows})
+    with pytest.raises(SceneError, match="too close together or too far apart to interpolate") as e:
+        scene(doc)
+    assert e.value.key == "excitation.text"
+
+
+def test_a_mass_whose_inertia_underflows_is_refused_by_the_solver():
+    """mass = 5e-324 kg is in (0, 10] kg, but m l² underflows to 0: ZeroDivisionError in the stiffness bound."""
+    sc = scene(dual(left={"mass": 5e-324}))
+    with pytest.raises(SolverError, match="too stiff"):
+        simulate(sc, 0.01)

@@ -76,6 +76,19 @@ def test_fixed_step_threshold_is_a_tenth_of_the_contact_period():
     assert run_of(variant(solver={"fixed_step": 1e-4})).summary()["warnings"] == []  # small enough: no warning
 
 
+def test_an_obstacle_pair_s_contact_period_is_the_berry_s_own():
+    """A scene with an obstacle and a fixed step: the summary's fixed-step check looked the obstacle up as a berry
+    (IndexError after the run, a traceback; found by fuzzing scene files). Its reduced mass is the berry's own: the
+    obstacle does not move."""
+    doc = variant(solver={"fixed_step": 1e-3, "t_end": 0.05})
+    doc["obstacles"] = [{"name": "floor", "point": [0.0, 0.0, -0.2], "normal": [0.0, 0.0, 1.0], "stiffness": 1e4}]
+    run = run_of(doc)
+    period, p = trust.contact_period(run)
+    assert run.scene.model.pair_name(p) == "left_floor"  # the stiffest relative to its mass: the lighter berry's
+    assert period == pytest.approx(2 * math.pi * math.sqrt(0.011 / 1e4))
+    assert isinstance(run.summary()["warnings"], list)
+
+
 def test_hertz_stiffness_is_taken_at_the_peak_force():
     doc = variant(solver={"t_end": 0.8})
     doc["contact"] = {"law": "hertz", "stiffness": 2e5}

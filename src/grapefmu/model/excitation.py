@@ -309,19 +309,33 @@ def read_pose_table(text: str, path: str, key: str) -> Excitation:
     else:
         rot = Rotation.from_euler("xyz", arr[:, 4:7])
     phi = _unwrapped((rot[0].inv() * rot).as_rotvec())
-    spline = CubicSpline(t, arr[:, 1:4], bc_type="clamped")
-    accel = spline(t, 2)
+    try:
+        with np.errstate(all="ignore"):
+            spline = CubicSpline(t, arr[:, 1:4], bc_type="clamped")
+            turn = CubicSpline(t, phi, bc_type="clamped")
+            accel = spline(t, 2)
+    except ValueError:
+        accel = np.full((len(t), 3), math.nan)
+    untimely = SceneError(key, f"{path} column time: the times ({t[0]:g} to {t[-1]:g} s, steps down to "
+                               f"{np.diff(t).min():g} s) are too close together or too far apart to interpolate")
+    if not np.isfinite(accel).all():  # steps of 1e-323 s, or a table spanning 1e155 s: no spline follows them
+        raise untimely
     worst = int(np.argmax(np.abs(accel).max(axis=1)))
     if np.abs(accel[worst]).max() > MAX_ACCEL:
         raise SceneError(key, f"{path} row {worst + 1} columns x, y, z: following these positions needs "
                               f"{np.abs(accel[worst]).max():.3g} m/s² (more than {MAX_ACCEL:g}): a jump the "
                               "interpolation cannot follow (a glitch, or positions in mm?)")
-    turn = CubicSpline(t, phi, bc_type="clamped")
     axis = phi[np.argmax(np.linalg.norm(phi, axis=1))]
     fixed_axis = not axis.any() or np.abs(np.cross(phi, axis)).max() <= 1e-12 * max(np.linalg.norm(axis), 1.0)
     knots = t if fixed_axis else np.concatenate(
         [np.linspace(a, b, POSE_TURN_SUBDIVISION, endpoint=False) for a, b in zip(t[:-1], t[1:])] + [t[-1:]])
-    alpha = _angular_accel(turn, rot[0], knots)
+    try:
+        with np.errstate(all="ignore"):
+            alpha = _angular_accel(turn, rot[0], knots)
+    except ValueError:  # the spline's rotation vectors overflowed (a span of 1e155 s or more)
+        raise untimely from None
+    if not np.isfinite(alpha).all():
+        raise untimely
     worst = int(np.argmax(np.abs(alpha).max(axis=1)))
     if np.abs(alpha[worst]).max() > MAX_ANGULAR_ACCEL:
         row = int(np.searchsorted(t, knots[worst], side="right"))

@@ -44,7 +44,9 @@ def contact_period(run: Run) -> tuple[float, int] | None:
     if not len(pair):
         return None
     m = M.berry["mass"]
-    m_eff = m[pair["i"]] * m[pair["j"]] / (m[pair["i"]] + m[pair["j"]])
+    obstacle = pair["j"] >= len(m)  # it does not move: the berry's own mass (it indexed a berry that is not there)
+    mi, mj = m[pair["i"]], m[np.where(obstacle, pair["i"], pair["j"])]
+    m_eff = np.where(obstacle, mi, mi * mj / (mi + mj))
     k = pair["stiffness"].astype(float).copy()
     smooth = pair["law"] != int(Law.KELVIN_VOIGT)
     peak = np.maximum(np.asarray(run.peak_force, dtype=float), 0.0)

@@ -74,6 +74,8 @@ def hinge_rate(b, gravity: float, turning: bool) -> float:
     rachis acceleration a scene may give (MAX_ACCEL); a turning rachis adds fields no such bound holds, so there only
     the damping's part is taken."""
     inertia = b.mass * b.twig_length * b.twig_length
+    if inertia <= 0.0:  # a mass so small that m l² underflows (5e-324 kg): no explicit step can follow it
+        return math.inf
     rate = b.hinge_damping / (2.0 * inertia)
     if not turning:
         k_low = b.hinge_stiffness - b.mass * b.twig_length * (gravity + MAX_ACCEL)
