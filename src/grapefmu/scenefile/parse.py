@@ -459,8 +459,11 @@ def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc
         text, path, where = _table(raw, key, base_dir, "CSV of time, ax, az")
         after = v.choice(f"{key}.after", raw["after"], exc.AFTER) if "after" in raw else None
         ex = exc.read_csv(text, path, where, v.boolean(f"{key}.hold", raw.get("hold", False)), after)
-        if abs(ex.arrays.table[:, 1:]).max() > acc:
+        table = ex.arrays.table  # time, a (3), α (3): each against its own bound (α was held to a's)
+        if abs(table[:, 1:4]).max() > acc:
             raise SceneError(where, f"accelerations must stay within ±{acc:g} m/s²")
+        if abs(table[:, 4:7]).max() > exc.MAX_ANGULAR_ACCEL:
+            raise SceneError(where, f"angular accelerations must stay within ±{exc.MAX_ANGULAR_ACCEL:g} rad/s²")
         return ex
     if kind == "pose-table":
         return exc.read_pose_table(*_table(raw, key, base_dir, "CSV pose table"))
