@@ -33,7 +33,7 @@ from grapefmu.model.model import off_axis
 from grapefmu.scenefile import default_scene_path
 from grapefmu.model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from grapefmu.solver.warmup import notice
-from grapefmu.recording import messages as msgs
+from grapefmu.recording import frames, messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
 from grapefmu.results.trust import overlap_of_radius, overlap_words, pressed_too_deep
@@ -146,7 +146,7 @@ class SimulatorNode(Node):
             self.create_subscription(message_class(msgs.topic_type(topic)), topic, handler, INPUT_QOS[self.mode],
                                      raw=True)
         self.gripper_frame = gp("gripper_frame")
-        self.rachis_frame = f"{self.prefix}rachis"
+        self.rachis_frame = frames.rachis(self.prefix)
         #: a planar scene's rachis turns about its y axis only: this world direction (None: spherical berries only)
         self.plane_normal = m.plane_normal(self.scene.excitation)
         if self.gripper_frame:

@@ -199,6 +199,10 @@ class ModelArrays(NamedTuple):
     turning: bool = False  # the rachis may turn: its ω and orientation ride in y too (Scene.arrays sets it)
 
 
+#: the rachis' TF frame (recording/frames.py)
+RACHIS_FRAME = "rachis"
+
+
 @dataclass(frozen=True)
 class Model:
     berries: tuple[Berry, ...]
@@ -219,6 +223,12 @@ class Model:
     @property
     def n_dof(self) -> int:
         return sum(b.ndof for b in self.berries)
+
+    @property
+    def frame_names(self) -> list[tuple[str, str]]:
+        """Each berry's two TF frames, (berry, its hinge), children of RACHIS_FRAME (recording/frames.py prefixes
+        them all)."""
+        return [(b.name, f"{b.name}_hinge") for b in self.berries]
 
     @property
     def dof_names(self) -> list[str]:

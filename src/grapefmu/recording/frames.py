@@ -13,7 +13,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ..model.model import Model
+from ..model.model import RACHIS_FRAME, Model
 from ..results import catalogue
 
 WORLD = "world"
@@ -21,7 +21,7 @@ PREFIX = "grape_cluster/"
 
 
 def rachis(prefix: str = PREFIX) -> str:
-    return f"{prefix}rachis"
+    return f"{prefix}{RACHIS_FRAME}"
 
 
 def hinges(model: Model) -> np.ndarray:
@@ -48,8 +48,8 @@ def compose(q_a, q_b) -> np.ndarray:
 
 def static_transforms(model: Model, prefix: str = PREFIX) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
     """(parent, child, translation, quaternion xyzw) of every transform that never changes."""
-    return [(rachis(prefix), f"{prefix}{name}_hinge", h, np.array([0.0, 0.0, 0.0, 1.0]))
-            for name, h in zip(model.names, hinges(model))]
+    return [(rachis(prefix), f"{prefix}{hinge}", h, np.array([0.0, 0.0, 0.0, 1.0]))
+            for (_, hinge), h in zip(model.frame_names, hinges(model))]
 
 
 def transforms(model: Model, snap: catalogue.Snapshot, k: int, prefix: str = PREFIX, world: str = WORLD):
@@ -59,7 +59,7 @@ def transforms(model: Model, snap: catalogue.Snapshot, k: int, prefix: str = PRE
     out = [(world, rachis(prefix), np.array(snap.base_displacement[k], dtype=float), q / np.linalg.norm(q))]
     p = snap.observation.position[k]
     q = quaternion_z_to(hinges(model) - p)
-    out += [(rachis(prefix), f"{prefix}{name}", p[i], q[i]) for i, name in enumerate(model.names)]
+    out += [(rachis(prefix), f"{prefix}{berry}", p[i], q[i]) for i, (berry, _) in enumerate(model.frame_names)]
     return out
 
 
@@ -68,8 +68,8 @@ def urdf(model: Model, prefix: str = PREFIX) -> str:
     root = rachis(prefix)
     lines = ['<?xml version="1.0"?>', f'<robot name={quoteattr(prefix.strip("/") or "grape_cluster")}>',
              f'  <link name={quoteattr(root)}/>']
-    for name, h, b in zip(model.names, hinges(model), model.berries):
-        link, hinge = f"{prefix}{name}", f"{prefix}{name}_hinge"
+    for (berry, hinge), h, b in zip(model.frame_names, hinges(model), model.berries):
+        link, hinge = f"{prefix}{berry}", f"{prefix}{hinge}"
         lines += [
             f'  <link name={quoteattr(hinge)}/>',
             f'  <joint name={quoteattr(hinge + "_joint")} type="fixed"><parent link={quoteattr(root)}/>'

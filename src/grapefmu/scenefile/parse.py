@@ -18,7 +18,7 @@ from ..model.bounds import Bound, bound
 from ..model.contact import (EFFECTIVE_MODULUS, LAW_BOUNDS, LAWS, RESTITUTION, ContactLaw, Law, hertz_stiffness,
                              hunt_crossley_chi, kelvin_voigt_damping, refuses_tension)
 from ..model.model import (ANGLE, ANGULAR_VELOCITY, CONTACT_LOCATIONS, INTEGRATORS, MAX_OVERLAP_FRACTION, METHODS,
-                           OBSTACLE_KINDS, Berry, ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings,
+                           OBSTACLE_KINDS, RACHIS_FRAME, Berry, ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings,
                            Thresholds)
 from .budget import check_state
 
@@ -183,9 +183,8 @@ def _distinct_names(model: Model) -> None:
     def key(k: int) -> str:
         return f"berries[{k}].name" if k < nb else f"obstacles[{k - nb}].name"
 
-    kinds = {"frame": [("rachis", None)] + [(f, k) for k, n in enumerate(model.names) for f in (n, f"{n}_hinge")],
-             "angle": [(d, k) for k, b in enumerate(model.berries)
-                       for d in ((f"{b.name}_swing", f"{b.name}_tilt") if b.spherical else (b.name,))],
+    kinds = {"frame": [(RACHIS_FRAME, None)] + [(f, k) for k, fs in enumerate(model.frame_names) for f in fs],
+             "angle": list(zip(model.dof_names, (k for k, b in enumerate(model.berries) for _ in range(b.ndof)))),
              "contact pair": [(model.pair_name(p), max(pr.i, pr.j)) for p, pr in enumerate(model.pairs)]}
     for what, named in kinds.items():
         seen: dict[str, int | None] = {}
