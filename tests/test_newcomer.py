@@ -493,8 +493,11 @@ def test_the_line_figure_draws_every_angle_under_its_own_name():
     pushed = [m.pair_name(p) for p in range(len(m.pairs)) if np.any(run.contact_force[:, p] > 0.0)]
     assert forces[:len(pushed)] == pushed and forces[len(pushed):] == (
         [f"{len(m.pairs) - len(pushed)} pairs never pushing (not drawn)"] if len(pushed) < len(m.pairs) else [])
-    assert all(ax.get_ylabel() != "rachis accel (m/s²)" or not any(x.get_label().startswith("alpha")
-                                                                      for x in ax.get_lines()) for ax in fig.axes)
+    pyplot().close(fig)
+    run.accel[:, 4] = 50.0 * np.sin(40.0 * run.t)  # a rachis that turns about y (the run's own copy)
+    fig = figure(run)
+    drawn = {ax.get_ylabel(): [x.get_label() for x in ax.get_lines()] for ax in fig.axes}
+    assert drawn["rachis accel (m/s²)"] == ["ax", "az"] and drawn["rachis angular accel (rad/s²)"] == ["alpha_y"]
     pyplot().close(fig)
 
 

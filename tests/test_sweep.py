@@ -168,8 +168,16 @@ def test_a_base_scene_every_run_would_refuse_is_refused_before_any_run(folder, c
     with pytest.raises(SceneError, match="unknown key.*in the base scene row.toml, which no parameter changes") as e:
         load_spec(folder / "grid.toml")
     assert e.value.key == "gravty"
-    (folder / "row.toml").write_text(row.replace("\nstiffness = 2000.0", "\nstiffness = -1.0"))
-    assert load_spec(folder / "grid.toml").parameters[0].key == "contact.stiffness"  # swept: every run sets it
+    # every run refused alike, but on the key a parameter sweeps: left to the runs (the sweep's own rows say so)
+    (folder / "row.toml").write_text(row)
+    (folder / "bad.toml").write_text(SPEC.format(mode="grid", stiffness="values = [-1.0]",
+                                                 damping="values = [1e-5, 4e-5, 1e-4]"))
+    spec = load_spec(folder / "bad.toml")
+    from grapefmu.sweep.spec import scene_doc
+    for run in (spec.runs()[0], spec.runs()[-1]):
+        with pytest.raises(SceneError) as e:
+            scene_from_dict(scene_doc(spec, run), spec.base_dir)
+        assert e.value.key == "contact.stiffness"
 
 
 def test_a_run_that_fails_in_an_unexpected_way_is_a_row_and_no_run_finished_is_a_failure(folder, capsys):
