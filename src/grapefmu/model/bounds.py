@@ -39,13 +39,17 @@ def bound(cls: type, name: str) -> Bound:
     return _bounds(cls)[name][0]
 
 
-def refusal(obj: Any, key: str) -> tuple[str, str] | None:
+def refusal(obj: Any, key: str, positive: tuple[str, ...] = ()) -> tuple[str, str] | None:
     """(key.field, why) for the first field of the dataclass `obj` outside its bound, or None (key "" for a top-level
-    object: the field's name alone). A field whose default is None may be None: a setting its user decides."""
+    object: the field's name alone). A field whose default is None may be None: a setting its user decides. The
+    fields named in `positive` must be above their bound's lower end (a size this obj uses, whose default 0 says it
+    has none)."""
     for name, (b, optional) in _bounds(type(obj)).items():
         value = getattr(obj, name)
         if value is None and optional:
             continue
+        if name in positive:
+            b = b._replace(lo_open=True)
         for k, x in enumerate(value) if isinstance(value, tuple) else ((None, value),):
             if isinstance(x, bool) or not isinstance(x, Real) or not b.holds(float(x)):
                 where = f"{key}.{name}" if key else name

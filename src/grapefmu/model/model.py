@@ -116,22 +116,19 @@ class Obstacle:
         """(key.field, why) for a value outside its bound or a shape the core cannot hold, or None."""
         if self.kind not in OBSTACLE_KINDS:
             return (f"{key}.kind", f"expected one of {', '.join(map(repr, OBSTACLE_KINDS))}, got {self.kind!r}")
-        why = refusal(self, key)
+        why = refusal(self, key, positive=OBSTACLE_SIZES.get(self.kind, ()))
         if why:
             return why
         if self.kind == "plane" and abs(math.hypot(*self.normal) - 1.0) > 1e-9:
             return (f"{key}.normal", f"expected a unit vector out of the solid, got {self.normal!r}")
-        if self.kind == "box" and min(self.size) <= 0.0:
-            return (f"{key}.size", f"expected three edge lengths > 0 m, got {self.size!r}")
         if self.kind == "capsule" and math.dist(self.point, self.end) < MIN_CAPSULE_LENGTH:
             return (f"{key}.end", f"the two ends must be at least {MIN_CAPSULE_LENGTH * 1e6:g} µm apart "
                     "(a sphere is a short capsule)")
-        if self.kind == "capsule" and self.radius <= 0.0:
-            return (f"{key}.radius", f"expected {bound(Obstacle, 'radius')._replace(lo_open=True).allowed}, "
-                    f"got {self.radius!r}")
         return None
 
 
+#: the sizes each kind of obstacle needs greater than 0 (the others' default, which they do not read, is 0)
+OBSTACLE_SIZES = {"box": ("size",), "capsule": ("radius",)}
 #: a capsule's shortest axis (m)
 MIN_CAPSULE_LENGTH = 1e-6
 

@@ -18,8 +18,8 @@ from ..model.bounds import Bound, bound
 from ..model.contact import (EFFECTIVE_MODULUS, LAW_BOUNDS, LAWS, RESTITUTION, ContactLaw, Law, hertz_stiffness,
                              hunt_crossley_chi, kelvin_voigt_damping, refuses_tension)
 from ..model.model import (ANGLE, ANGULAR_VELOCITY, CONTACT_LOCATIONS, INTEGRATORS, MAX_OVERLAP_FRACTION, METHODS,
-                           OBSTACLE_KINDS, RACHIS_FRAME, Berry, ContactPair, Coupling, Model, Obstacle, Scene, SolverSettings,
-                           Thresholds)
+                           OBSTACLE_KINDS, RACHIS_FRAME, Berry, ContactPair, Coupling, Model, Obstacle, Scene,
+                           SolverSettings, Thresholds)
 from .budget import check_state
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,31}$")
@@ -334,8 +334,9 @@ def _obstacles(raw: Any, berries: list[Berry], thresholds: Thresholds) -> tuple[
                         "normal": tuple(float(x) for x in normal / length)}
             r_obstacle = math.inf
         elif kind == "box":
+            edge = bound(Obstacle, "size")._replace(lo_open=True)  # > 0 for a box (OBSTACLE_SIZES)
             shape_of = {"point": v.vector(f"{key}.centre", o["centre"], 3, point),
-                        "size": v.vector(f"{key}.size", o["size"], 3, bound(Obstacle, "size")),
+                        "size": v.vector(f"{key}.size", o["size"], 3, edge),
                         "yaw": v.within(f"{key}.yaw", o.get("yaw", 0.0), bound(Obstacle, "yaw"))}
             r_obstacle = math.inf
         else:
@@ -343,7 +344,7 @@ def _obstacles(raw: Any, berries: list[Berry], thresholds: Thresholds) -> tuple[
             if not (isinstance(ends, list) and len(ends) == 2):
                 raise SceneError(f"{key}.ends", f"expected [[x, y, z], [x, y, z]] in m, got {v.show(ends)}")
             a, b = (v.vector(f"{key}.ends[{e}]", ends[e], 3, point) for e in range(2))
-            r_obstacle = v.within(f"{key}.radius", o["radius"], bound(Obstacle, "radius"))
+            r_obstacle = v.within(f"{key}.radius", o["radius"], bound(Obstacle, "radius")._replace(lo_open=True))
             shape_of = {"point": a, "end": b, "radius": r_obstacle}
         contact = {k: o[k] for k in CONTACT_KEYS - {"pairs"} if k in o}
         make = _law_of(key, contact)
