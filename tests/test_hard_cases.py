@@ -195,3 +195,49 @@ def test_a_swing_over_the_spherical_charts_pole(tilt_rate):
         assert float(re.match(r"integration stopped at t = ([0-9.]+) s", str(e.value))[1]) == pytest.approx(
             math.pi / 2 / w0, abs=1e-6)
     assert s.t == 0.0
+
+
+def test_a_spherical_berry_carried_into_its_charts_pole_stops_at_the_step_floor():
+    """Swung at the documented limits (80°, −1000 rad/s) on a damped hinge: the damping's torque on the tilt stays as
+    the tilt's inertia m l² cos² s vanishes, draining its momentum, and the berry is carried into the pole at −90°.
+    Its accepted steps crept down unchecked (a rejected step's retry alone was held to the resolution of time): to
+    3.6e-16 s at 300 000 steps and 3.4e-19 s at the default 10⁷, 35 s later. Now the run stops when the steps the
+    error control asks for fall below 1.6e-14 s, in one step size and in islands, naming the berry."""
+    import re
+    from dataclasses import replace
+
+    from grapefmu.errors import SolverError
+    from grapefmu.solver.solver import Solver
+
+    sc = scene({"berries": [{"name": "b", "kind": "spherical", "mass": 0.011, "radius": 0.0135, "twig_length": 0.03,
+                             "hinge_x": 0.0, "hinge_damping": 1e-3, "angle": [1.396, 0.2],
+                             "angular_velocity": [-1000.0, 0.0]}], "solver": {"t_end": 0.1}})
+    s = Solver(sc, max_steps=300_000)
+    in_islands = replace(sc, solver=replace(sc.solver, islands=True, max_steps=300_000))
+    for run in (s.run, lambda: simulate(in_islands)):
+        with pytest.raises(SolverError, match=r"spherical berry 'b' swung to -90\.0000°, where its swing–tilt") as e:
+            run()
+        h = float(re.search(r"the steps shrank to ([0-9.e+-]+) s", str(e.value))[1])
+        assert 0.2 * 1.6e-14 <= h <= 1.6e-14  # the control's last proposal, at most a fifth below the floor
+    assert s.t == 0.0
+
+
+@pytest.mark.parametrize("angle, rates", [([1.396, 0.0], [-1000.0, 0.01]), ([-1.396, 0.3], [-1000.0, 0.0])])
+def test_a_hard_swing_at_80_degrees_that_passes_the_pole_still_runs(angle, rates):
+    """As hard a start without hinge damping keeps its tilt momentum: it passes the pole (as near as cos s = 2e-4)
+    every turn and runs, so no start in the documented ranges can be refused for the pole before the run."""
+    sc = scene({"berries": [{"name": "b", "kind": "spherical", "mass": 0.011, "radius": 0.0135, "twig_length": 0.03,
+                             "hinge_x": 0.0, "angle": angle, "angular_velocity": rates}], "solver": {"t_end": 1.0}})
+    run = simulate(sc)
+    assert run.t[-1] == pytest.approx(1.0)
+    assert np.abs(np.cos(run.angles[:, 0])).min() < 2e-2  # it did swing past the pole's neighbourhood
+
+
+@pytest.mark.parametrize("excitation", [{"kind": "impulse", "peak": [10.0, 0.0], "start": 1e-200, "duration": 0.01},
+                                        {"kind": "sine", "amplitude": [10.0, 0.0], "frequency": 5.0, "start": 1e-300}])
+def test_an_excitation_starting_a_hair_after_zero_runs(excitation):
+    """The first step toward a breakpoint 1e-300 s away is about that long, and grows tenfold a step from there; at
+    1e-158 s DOP853's error estimate squared underflowed (0.01 ‖e3‖² to 0 with ‖e5‖² = 0: 0/0) and the valid
+    run stopped, 'the state became NaN or infinite'."""
+    run = simulate(scene(dual(excitation=excitation, solver={"t_end": 0.1})))
+    assert run.t[-1] == pytest.approx(0.1) and np.isfinite(run.y).all()

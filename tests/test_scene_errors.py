@@ -282,3 +282,65 @@ def test_a_csv_excitation_s_angular_accelerations_have_their_own_bound():
     with pytest.raises(SceneError, match=r"angular accelerations must stay within ±10000 rad/s²") as e:
         scene(doc)
     assert e.value.key == "excitation.text"
+
+
+@pytest.mark.parametrize("times, row, apart", [
+    (("0", "5e-324", "1e-323"), 2, "1.6e-14 s"),
+    (("0", "0.001", "0.001000000000000001", "0.002"), 3, "1.6e-14 s"),
+    (("1e-300", "0.5"), 1, "1.6e-14 s"),  # the table is zero before its first row: a breakpoint 1e-300 s into the run
+    (("0", "100", "100.0000000000001"), 3, "1.6e-12 s"),  # the floor grows with the time, as the solver's does
+])
+def test_csv_rows_closer_than_the_solver_steps_are_refused(times, row, apart):
+    """A CSV whose time column steps by 5e-324 or 1e-300 s passed the scene and ran 10⁷ steps of 0 s at t = 0 (a
+    starting step toward a row 1e-300 s away overflows the first step's probe to 0) before the step limit stopped it,
+    minutes later (found by fuzzing scene files). Rows are now held at least the solver's shortest step apart, before
+    a step."""
+    text = "time,ax,az\n" + "".join(f"{t},{k % 2},0\n" for k, t in enumerate(times))
+    doc = dual(excitation={"kind": "csv", "text": text, "after": "zero"})
+    with pytest.raises(SceneError, match=rf"inline CSV row {row} column time: .* rows must be at least {apart} apart"
+                                         r" \(1\.6e-14 s per second of max\(1 s, time\)") as e:
+        scene(doc)
+    assert e.value.key == "excitation.text"
+
+
+def test_csv_file_rows_too_close_are_refused_naming_the_file(tmp_path):
+    (tmp_path / "shake.csv").write_text("time,ax,az\n0,0,0\n1e-300,1,0\n2e-300,0,0\n")
+    doc = dual(excitation={"kind": "csv", "file": "shake.csv", "after": "zero"})
+    from grapefmu.scenefile import scene_from_dict
+    with pytest.raises(SceneError, match=r"shake\.csv row 2 column time: 1e-300 s is 1e-300 s after row 1's 0\.0") as e:
+        scene_from_dict(doc, tmp_path)
+    assert e.value.key == "excitation.file"
+
+
+def test_pose_table_rows_closer_than_the_solver_steps_are_refused():
+    """Poses 1e-300 s apart that stand still: the spline follows them (no jump to refuse), and the run stalled as the
+    CSV's did."""
+    text = "time,x,y,z,roll,pitch,yaw\n0,0,0,0,0,0,0\n1e-300,0,0,0,0,0,0\n0.05,0.001,0,0,0,0,0\n"
+    with pytest.raises(SceneError, match=r"inline CSV row 2 column time: 1e-300 s .* at least 1\.6e-14 s apart") as e:
+        scene(dual(excitation={"kind": "pose-table", "text": text}))
+    assert e.value.key == "excitation.text"
+
+
+@pytest.mark.parametrize("rate, hold", [(1e3, False), (1e4, False), (1e4, True)])
+def test_csv_sampled_at_1_and_10_khz_still_runs(rate, hold):
+    """The floor on row spacing is ten orders of magnitude below a controller's or a sensor's sample interval."""
+    t = [k / rate for k in range(int(0.05 * rate) + 1)]
+    text = "time,ax,az\n" + "".join(f"{x!r},{20 * math.sin(2 * math.pi * 30 * x)!r},0\n" for x in t)
+    run = simulate(scene(dual(excitation={"kind": "csv", "text": text, "hold": hold}, solver={"t_end": 0.05})))
+    assert run.t[-1] == pytest.approx(0.05)
+
+
+def test_a_table_built_in_code_with_rows_1e_300_s_apart_stops_at_once():
+    """A table the file would refuse, put in a scene in code: its first step was 0 s (initial_step's probe overflows)
+    and was accepted 10⁷ times over at t = 0 before the step limit. The solver now holds an accepted step to the floor
+    a rejected one is held to, and stops on the first."""
+    import numpy as np
+
+    from grapefmu.model import excitation as exc
+
+    sc = replace(scene(dual(solver={"t_end": 0.1})),
+                 excitation=exc.table("csv", np.array([[0.0, 0.0, 0.0], [1e-300, 1.0, 0.0], [2e-300, 0.0, 0.0]])))
+    s = Solver(sc, max_steps=1_000_000)
+    with pytest.raises(SolverError, match=r"at t = 0 s: the step size fell below the resolution of time"):
+        s.run()
+    assert s.t == 0.0

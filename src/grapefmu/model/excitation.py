@@ -100,6 +100,11 @@ def quaternion_from_rpy(roll: float, pitch: float, yaw: float) -> tuple[float, f
     return tuple(float(c) for c in Rotation.from_euler("xyz", [roll, pitch, yaw]).as_quat())
 
 
+#: the shortest step the solver takes, per second of max(1 s, |t|) (1.6e-14 s up to t = 1 s): a step its error control
+#: would make shorter ends the run, "the step size fell below the resolution of time" (solver/loop.py), and a table's
+#: rows, on each of which it lands a step, must lie at least this far apart (check_row_spacing)
+TIME_RESOLUTION = 16e-15
+
 #: what a CSV excitation does after its last row (the scene's `after`): keep the last row's acceleration, or zero
 AFTER = ("hold", "zero")
 #: the time of the row that carries a held last value on "forever" (beyond any run's t_end)
@@ -112,6 +117,29 @@ def check_covers(ex: Excitation, t_end: float, t_key: str) -> None:
         raise SceneError(ex.key, f"the CSV ends at {ex.defined_until:g} s, before the run's end {t_end:g} s "
                                  f"({t_key}); say what follows its last row with after = \"hold\" (keep its "
                                  f"acceleration) or after = \"zero\" in [excitation], or extend the file")
+
+
+def check_row_spacing(t: np.ndarray, path: str, key: str) -> None:
+    """Refuse a table whose rows (times sorted, from 0 s) come closer together than the solver steps, naming the row.
+    The solver lands a step on every row (each is a breakpoint), and its error control takes none shorter than
+    TIME_RESOLUTION · max(1 s, t) (1.6e-14 s up to t = 1 s; solver/loop.py). Rows closer than that (5e-324 or 1e-300
+    s apart) make the starting step toward the next row overflow initial_step's probe to 0 s, which the solver
+    refuses as a step below the resolution of time, a reason about stiffness that names no key (it once took 10⁷
+    steps of 0 s to the step limit). A first row after 0 s is held as far from the run's start (the table is zero
+    before it). A table sampled at 1 kHz or 10 kHz is ten orders of magnitude clear of the floor; one 1e-20 s apart
+    that happened to run is refused too: no recorded signal is sampled at 6e13 Hz."""
+    start = np.concatenate([[0.0], t[:-1]]) if t[0] > 0.0 else t[:-1]
+    end = t if t[0] > 0.0 else t[1:]
+    least = TIME_RESOLUTION * np.maximum(1.0, start)
+    bad = np.flatnonzero(end - start < least)
+    if bad.size:
+        k = int(bad[0])
+        row = k + 1 if t[0] > 0.0 else k + 2  # the later row, counted from 1 as the other errors count them
+        what = "the run's start" if t[0] > 0.0 and k == 0 else f"row {row - 1}'s {float(start[k])!r} s"
+        raise SceneError(key, f"{path} row {row} column time: {float(end[k])!r} s is {end[k] - start[k]:.3g} s after "
+                              f"{what}; rows must be at least {least[k]:.3g} s apart ({TIME_RESOLUTION:g} s per "
+                              "second of max(1 s, time): the shortest step the solver takes, and it lands one on "
+                              "every row)")
 
 
 def vector3(v) -> tuple[float, float, float]:
@@ -234,6 +262,7 @@ def read_csv(text: str, path: str, key: str, hold: bool = False, after: str | No
         raise SceneError(key, f"{path}: time must increase strictly from row to row")
     if arr[0, 0] < 0:
         raise SceneError(key, f"{path}: time must start at or after 0 s")
+    check_row_spacing(arr[:, 0], path, key)
     if hold:
         arr = zero_order_hold(arr)
     last = float(arr[-1, 0])
@@ -320,6 +349,7 @@ def read_pose_table(text: str, path: str, key: str) -> Excitation:
                                f"{np.diff(t).min():g} s) are too close together or too far apart to interpolate")
     if not np.isfinite(accel).all():  # steps of 1e-323 s, or a table spanning 1e155 s: no spline follows them
         raise untimely
+    check_row_spacing(t, path, key)  # poses 1e-300 s apart that the spline follows, standing still
     worst = int(np.argmax(np.abs(accel).max(axis=1)))
     if np.abs(accel[worst]).max() > MAX_ACCEL:
         raise SceneError(key, f"{path} row {worst + 1} columns x, y, z: following these positions needs "

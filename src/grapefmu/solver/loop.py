@@ -11,6 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..model.excitation import TIME_RESOLUTION
 from ..physics.compiled import inline, jit
 from ..physics.dynamics import rhs
 from ..physics.excitation import applied_accel
@@ -209,7 +210,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
                 fac = 0.2 if not math.isfinite(en) else max(0.2, 0.9 * en ** err_exp)
                 clk.h = h * fac
                 cnt.rejected += 1
-                if clk.h < 1e-15 * max(1.0, abs(t0)) * 16:
+                if clk.h < TIME_RESOLUTION * max(1.0, abs(t0)):
                     return STEP_UNDERFLOW if math.isfinite(en) else NOT_FINITE
                 continue
         # the berries at the step's end are the FSAL stage's: kept before DOP853's extra stages overwrite them
@@ -295,6 +296,14 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
                 fac = min(10.0, max(0.2, 0.9 * en ** err_exp))
             clk.err_last = en
             clk.h = h_prop if (clipped or event) and fac * h < h_prop else h * fac
+            # An accepted step is held to the floor a rejected one is: a next step the error control shrinks (or keeps)
+            # below the resolution of time ends the run now. Without this the steps crept down unchecked while they
+            # passed, 1e-19 s after minutes at the step limit: a spherical berry carried into its chart's pole (solver
+            # POLE), or a step of 0 s from a breakpoint 1e-300 s ahead (initial_step's probe overflows), which never
+            # moved. A step clipped to a breakpoint or an event is the table's or the contact's size, not the
+            # control's, and a step growing from a short one (a breakpoint close to the start) is let grow.
+            if not (clipped or event) and clk.h <= h and clk.h < TIME_RESOLUTION * max(1.0, abs(t0)):
+                return STEP_UNDERFLOW
             # A contact that opens stiffens the system at once, and the step size from before it was often rejected:
             # the next onset starts no longer than the last contact's first step proposed (docs/solver.md).
             if clk.after_onset:

@@ -193,7 +193,7 @@ def error_norm(h, y, ynew, TB, stages, cfg, err, scale, acc):
     s3 = 0.0
     for r in range(y.shape[0]):
         s3 += (h * acc[r] / scale[r]) ** 2
-    if s5 == 0.0 and s3 == 0.0:
+    if s5 == 0.0:  # 0 as the formula gives it, also where 0.01 s3 underflows (steps of 1e-158 s: 0/0, NaN)
         return 0.0
     return s5 / math.sqrt((s5 + 0.01 * s3) * y.shape[0])
 
