@@ -238,3 +238,15 @@ def test_contact_log_agrees_with_the_impact_book():
     assert np.array_equal(run.contacts["mode"], run.mode)
     again = ContactLog.of(run.contacts)
     assert np.array_equal(again.dense(len(run.t)), run.contacts)
+
+
+def test_write_run_refuses_a_directory_as_its_file_naming_it(tmp_path):
+    """write_run(run, "x.csv") where x.csv is a directory raised IsADirectoryError on its temporary file (an audit);
+    the CLI already refused it. Now write_run checks the path as the CLI does, and writes nothing."""
+    from grapefmu.errors import GrapefmuError
+    from grapefmu.write import write_run
+    from .conftest import dual, scene
+    (tmp_path / "x.csv").mkdir()
+    with pytest.raises(GrapefmuError, match=r"output .*x\.csv: is a directory; expected a file name ending in"):
+        write_run(simulate(scene(dual(solver={"t_end": 0.01}))), tmp_path / "x.csv")
+    assert [p.name for p in tmp_path.iterdir()] == ["x.csv"] and not any((tmp_path / "x.csv").iterdir())

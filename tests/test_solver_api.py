@@ -360,3 +360,111 @@ def test_a_still_state_gives_the_trajectory_of_one_that_carries_the_rachis(colli
     np.testing.assert_allclose(still.angles, carried.angles, rtol=0, atol=1e-8)
     np.testing.assert_allclose(still.ledger, carried.ledger, rtol=1e-8, atol=1e-14)
     assert not still.base_displacement.any() and not carried.base_displacement.any()
+
+
+@pytest.mark.parametrize("kwargs, words", [
+    (dict(rtol=float("nan")), r"rtol: expected a number in \[1e-14, 0.1\], got nan"),
+    (dict(atol=0.0), r"atol: expected a number in \(1e-16, 1\], got 0.0"),
+    (dict(rtol=-1.0), "rtol"), (dict(fixed_step=float("inf")), r"fixed_step: expected a number in \[0, 1\] s"),
+    (dict(fixed_step=-1.0), "fixed_step"),
+])
+def test_settings_a_scene_file_could_not_hold_are_refused_by_solver_and_simulate(collision_scene, kwargs, words):
+    """An audit: rtol NaN or atol 0 from Python made the first step size NaN, and the loop rejected NaN steps forever
+    (rejections do not count towards max_steps; Ctrl-C could not reach it); fixed_step inf or −1 and rtol −1 were
+    taken silently. Each is now refused in the range its scene key has."""
+    with pytest.raises(SolverError, match=words):
+        Solver(collision_scene, **kwargs)
+    with pytest.raises(SolverError, match=words):
+        simulate(collision_scene, 0.1, **kwargs)
+
+
+@pytest.mark.parametrize("kwargs, words", [(dict(max_steps=0), r"max_steps: expected an integer in \[1, 1e\+12\]"),
+                                           (dict(t_start=float("nan")), "t_start: expected a finite time")])
+def test_a_step_limit_or_start_time_out_of_range_is_refused(collision_scene, kwargs, words):
+    with pytest.raises(SolverError, match=words):
+        Solver(collision_scene, **kwargs)
+
+
+def test_a_nan_step_size_ends_the_loop_instead_of_rejecting_forever(tmp_path):
+    """The loop's underflow check let a NaN step size through (NaN < bound is False): with the settings checked at the
+    door this is defence in depth, tested behind the door (a corrupted config), in a process of its own so that a
+    hang fails the test instead of the suite."""
+    import subprocess
+    import sys
+    code = ("import math; from grapefmu import Solver, SolverError; from tests.conftest import scene, dual\n"
+            "s = Solver(scene(dual(solver={'t_end': 0.1}))); s.config[0]['rtol'] = math.nan\n"
+            "try:\n    s.run(0.1)\nexcept SolverError as e:\n    print('refused:', e)\n")
+    from pathlib import Path
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         cwd=Path(__file__).resolve().parents[1])
+    assert "refused: integration stopped at t = 0 s" in out.stdout, out.stdout + out.stderr
+
+
+@pytest.mark.parametrize("args, words", [
+    ((-1.0,), "t_end: expected a time from the solver's t = 0.5 s"), ((float("nan"),), "t_end"),
+    ((float("inf"),), "t_end"), (("0.9",), "t_end"), ((0.2,), "t_end"),
+    ((0.9, 0.0), r"output_interval: expected a number in \[1e-06, 100000\] s, got 0.0"),
+    ((0.9, float("inf")), "output_interval"), ((0.9, float("nan")), "output_interval"),
+    ((5e4, 1e-6), "t_end, output_interval: .* GiB of memory"),
+])
+def test_run_refuses_an_end_or_interval_it_cannot_take_and_keeps_the_state(collision_scene, args, words):
+    """Each was a raw ValueError, ZeroDivisionError or MemoryError from numpy (an audit), and output_interval inf gave a
+    run of one sample at its start whose summary said t_end 0 s."""
+    from grapefmu.errors import GrapefmuError
+    s = Solver(collision_scene)
+    s.run(0.5)
+    before = s.get_state()
+    with pytest.raises(GrapefmuError, match=words):
+        s.run(*args)
+    assert same_state(before, s.state)
+    assert len(s.run(0.5).t) == 1  # a run of no length is one sample, the state now
+
+
+def test_dense_output_is_refused_before_a_step_and_outside_it(collision_scene):
+    """Before any step it gave NaN and numpy's warnings; outside the last step it extrapolated silently."""
+    s = Solver(collision_scene)
+    with pytest.raises(SolverError, match="no step taken yet"):
+        s.dense_output()
+    s.advance(0.01)
+    y_of = s.dense_output()
+    np.testing.assert_allclose(y_of(s.t), s.y, atol=1e-12)
+    with pytest.raises(SolverError, match=r"t: expected times in the last step"):
+        y_of(s.t + 10.0)
+
+
+def test_advance_refuses_a_step_that_cannot_move_time_and_takes_any_real_number(collision_scene):
+    """advance(1e-20) at t = 0.5 s returned with t unchanged ("integrate exactly dt seconds"); numpy's float32 was
+    refused where float64 and int were taken."""
+    s = Solver(collision_scene)
+    s.advance(np.float32(0.5))
+    before = s.get_state()
+    with pytest.raises(SolverError, match=r"dt: 1e-20 s does not move t = 0\.5 s"):
+        s.advance(1e-20)
+    assert same_state(before, s.state)
+
+
+def test_a_fixed_step_too_small_for_the_step_limit_is_refused_before_a_step(collision_scene):
+    """fixed_step 1e-300 took 10⁷ steps before it was refused."""
+    s = Solver(collision_scene, fixed_step=1e-300)
+    with pytest.raises(SolverError, match=r"fixed_step: 0.1 s in steps of 1e-300 s is 1e\+299 steps, more than "
+                                          r"max_steps = 10000000"):
+        s.run(0.1)
+    assert s.stats["steps"] == 0
+
+
+def test_a_state_overlapping_deeply_while_its_mode_says_apart_is_refused(collision_scene):
+    """set_state took a state whose berries overlapped 0.53 of a radius with their pair's mode apart: stepped, the
+    berries were flung apart at 46 rad/s (an audit). A solver that presses that deep holds the pair in contact, and
+    such a state is taken."""
+    s = Solver(collision_scene)
+    state = s.get_state()
+    state.physical.y[:2] = 0.4, 0.0  # the left berry swung into the right one, hanging still: 8.5 mm deep
+    before = s.get_state()
+    with pytest.raises(StateError, match=r"state physical.y: berries 'left' and 'right' overlap by .* while its "
+                                         "contact mode says apart"):
+        s.set_state(state)
+    assert same_state(before, s.state)
+    state.physical.contacts["mode"] = 1
+    state.broad_phase.near[0], state.broad_phase.count[0] = 0, 1  # a pair in contact is on the near list
+    s.set_state(state)
+    assert s.touching

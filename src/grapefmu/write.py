@@ -4,9 +4,8 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
-from .errors import GrapefmuError
 from .results.run import Run
-from .results.writers import check_target, one_of
+from .results.writers import check_target
 
 #: every file type write_run writes, with the module and function that write it (imported on use)
 WRITERS = {
@@ -22,8 +21,5 @@ def check_output(path: str | Path, option: str = "output") -> Path:
 
 
 def write_run(run: Run, path: str | Path) -> None:
-    suffix = Path(path).suffix.lower()
-    if suffix not in WRITERS:
-        raise GrapefmuError(f"{path}: unknown file type {suffix!r}; use {one_of(WRITERS)}")
-    module, name = WRITERS[suffix]
+    module, name = WRITERS[check_output(path).suffix.lower()]
     getattr(importlib.import_module(module), name)(run, path)

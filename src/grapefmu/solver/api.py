@@ -11,7 +11,7 @@ from ..results.run import Run
 from .budget import check_samples
 from .components import run_by_group
 from .islands import Islands
-from .solver import Solver
+from .solver import Solver, refuse_out_of_range
 
 #: a paper-method run is compared with an event-located run of the same scene up to this many berries
 #: (the second run costs about as much as the first; beyond this the warning says it was skipped)
@@ -33,24 +33,29 @@ def simulate(scene: Scene, t_end: float | None = None, *, method: str | None = N
     the same scene (`cross_check`, on by default for the paper method); a disagreement, or a comparison
     skipped because the scene is too large, becomes a line of `run.summary()["warnings"]`."""
     method = method or scene.solver.method
+    refuse_out_of_range(t_end=t_end, output_interval=output_interval, rtol=rtol, atol=atol, fixed_step=fixed_step)
     check_samples(scene.model, scene.solver.t_end if t_end is None else t_end,
                   scene.solver.output_interval if output_interval is None else output_interval,
                   "solver.t_end" if t_end is None else "t_end",
                   "solver.output_interval" if output_interval is None else "output_interval")
     check_covers(scene.excitation, scene.solver.t_end if t_end is None else t_end,
                  "solver.t_end" if t_end is None else "t_end")
+    def hook(done: float, share: float) -> Callable[[float, float], None] | None:
+        """progress, of a group's run placed within the whole run's."""
+        return None if progress is None else lambda t, te: progress((done + share * t / te) * te, te)
+
     if method == "reference":
         from .reference import simulate_reference
-        return run_by_group(scene, lambda sc, *_: simulate_reference(sc, t_end, rtol=rtol, atol=atol,
-                                                                     output_interval=output_interval))
+        return run_by_group(scene, lambda sc, done, share: simulate_reference(
+            sc, t_end, rtol=rtol, atol=atol, output_interval=output_interval, progress=hook(done, share)))
 
     step = scene.solver.fixed_step if fixed_step is None else fixed_step
 
     def one(sc: Scene, done: float, share: float) -> Run:
-        hook = None if progress is None else lambda t, te: progress((done + share * t / te) * te, te)
         if runs_in_islands(scene.solver.islands, sc.model.n_berries, method, step):
-            return Islands(sc, rtol=rtol, atol=atol).run(t_end, output_interval, hook)
-        return Solver(sc, method=method, rtol=rtol, atol=atol, fixed_step=fixed_step).run(t_end, output_interval, hook)
+            return Islands(sc, rtol=rtol, atol=atol).run(t_end, output_interval, hook(done, share))
+        return Solver(sc, method=method, rtol=rtol, atol=atol, fixed_step=fixed_step).run(t_end, output_interval,
+                                                                                          hook(done, share))
 
     run = run_by_group(scene, one)
     if method == "paper" and (cross_check is None or cross_check):

@@ -210,7 +210,7 @@ def integrate(M, X, TB, S, config, R, Z, t_target, max_steps):
                 fac = 0.2 if not math.isfinite(en) else max(0.2, 0.9 * en ** err_exp)
                 clk.h = h * fac
                 cnt.rejected += 1
-                if clk.h < TIME_RESOLUTION * max(1.0, abs(t0)):
+                if not clk.h >= TIME_RESOLUTION * max(1.0, abs(t0)):  # NaN too: rejections are not counted as steps
                     return STEP_UNDERFLOW if math.isfinite(en) else NOT_FINITE
                 continue
         # the berries at the step's end are the FSAL stage's: kept before DOP853's extra stages overwrite them

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -44,7 +45,8 @@ MAX_STEP = 5e-4  # s: every switch that lasts longer than this is seen
 
 def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float | None = None,
                        atol: float | None = None, output_interval: float | None = None,
-                       integrator: str = "DOP853", max_step: float = MAX_STEP):
+                       integrator: str = "DOP853", max_step: float = MAX_STEP,
+                       progress: Callable[[float, float], None] | None = None):
     s = scene.solver
     t_end = s.t_end if t_end is None else float(t_end)
     rtol = s.rtol if rtol is None else rtol
@@ -96,6 +98,8 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
         return ev
 
     while t < t_end:
+        if progress:
+            progress(t, t_end)
         segments += 1
         if segments > MAX_SEGMENTS:
             raise SolverError(f"reference: more than {MAX_SEGMENTS} contact switches before t = {t:.6g} s")
@@ -167,6 +171,8 @@ def simulate_reference(scene: Scene, t_end: float | None = None, *, rtol: float 
                 rows.append([p, o[0], t, o[1], o[2], o[3], y[o_j] - o[4], y[o_d] - o[5], -ddot])
             st["mode"][p] = new
     wall = time.perf_counter() - wall
+    if progress:
+        progress(t_end, t_end)
     for p, o in open_imp.items():
         rows.append([p, o[0], t, o[1], o[2], o[3], y[ny + p] - o[4], y[ny + npair + p] - o[5], math.nan])
     th = scene.thresholds

@@ -217,7 +217,8 @@ def advance(s, dt, held, a, omega_set, omega, max_steps):
     (world, rad/s) if omega_set, integrate dt. Returns (status, t_target, finished impacts in the scratch
     recorder); the caller restores the state (memory <- backup) if the status is a failure. REFUSED, with the
     state untouched, for an input out of its bounds (model/excitation.py) or a turn of a rachis that does not
-    turn: the caller says which (one check here, in the call a face makes every step, instead of in Python)."""
+    turn, or a dt that would not move t: the caller says which (one check here, in the call a face makes every
+    step, instead of in Python)."""
     for k in range(6):
         bound = MAX_ACCEL if k < 3 else MAX_ANGULAR_ACCEL
         if not (-bound <= a[k] <= bound):
@@ -230,6 +231,8 @@ def advance(s, dt, held, a, omega_set, omega, max_steps):
             omega[0] != 0.0 or omega[1] != 0.0 or omega[2] != 0.0))):
         return REFUSED, 0.0, 0
     if not s.model.moving and (a[0] != 0.0 or a[1] != 0.0 or a[2] != 0.0):
+        return REFUSED, 0.0, 0
+    if s.state.physical.t[0] + dt == s.state.physical.t[0]:  # a dt below t's resolution would not move it
         return REFUSED, 0.0, 0
     s.backup[:] = s.memory
     S = s.state

@@ -12,12 +12,14 @@ import hashlib
 import math
 import time
 from collections.abc import Callable
+from numbers import Integral, Real
 
 import numpy as np
 
-from ..errors import SceneError, SolverError
+from ..errors import SceneError, SolverError, StateError
 from ..model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
-from ..model.model import MAX_OVERLAP_FRACTION, Scene, off_axis
+from ..model.bounds import bound
+from ..model.model import MAX_OVERLAP_FRACTION, Scene, SolverSettings, off_axis
 from ..physics import observe as obs
 from ..physics.compiled import entry
 from ..physics.excitation import ACCEL_COMPONENTS, base_accel
@@ -30,6 +32,7 @@ from ..results.records import WORK, concat
 from ..results.run import Run
 from . import session as ses
 from . import state as st
+from .budget import check_samples
 from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW, grid_last
 from .stiffness import contact_hint, fixed_step_hint, least_steps, refuse_stiff
 from .tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5, Tableau
@@ -114,9 +117,12 @@ class Solver:
         if self.method not in ("event", "paper"):
             raise SolverError(f"method: Solver runs 'event' or 'paper', got {self.method!r} "
                               "(simulate() runs 'reference')")
-        self.rtol = rtol if rtol is not None else s.rtol
-        self.atol = atol if atol is not None else s.atol
-        self.fixed_step = fixed_step if fixed_step is not None else s.fixed_step
+        refuse_out_of_range(rtol=rtol, atol=atol, fixed_step=fixed_step, max_steps=max_steps)
+        if not (isinstance(t_start, Real) and not isinstance(t_start, bool) and math.isfinite(t_start)):
+            raise SolverError(f"t_start: expected a finite time in s, got {t_start!r}")
+        self.rtol = float(rtol) if rtol is not None else s.rtol
+        self.atol = float(atol) if atol is not None else s.atol
+        self.fixed_step = float(fixed_step) if fixed_step is not None else s.fixed_step
         #: the Runge–Kutta pair that steps it, by name (INTEGRATORS; a run's stats give it as "integrator")
         self.integrator = integrator_for(self.method, self.rtol, self.fixed_step, scene.model.n_berries, driven,
                                          s.integrator)
@@ -141,10 +147,10 @@ class Solver:
         self._closed: list[np.ndarray] = []
         # session.advance and .refresh for the types a face's step passes them (compiled.entry), on the first call
         self._advance = self._refresh = None
-        #: at least this many steps per simulated second, set by the stiffest hinge (solver/stiffness.py); a fixed
-        #: step takes the steps it is given, so none
-        self._least_rate = 0.0 if self.fixed_step > 0.0 else least_steps(self.model, self.tableau, 1.0,
-                                                                          self.layout.turning)[0]
+        #: at least this many steps per simulated second: set by the stiffest hinge (solver/stiffness.py), or the fixed
+        #: step's own (refuse_stiff refuses a span either needs more than max_steps for, before a step)
+        self._least_rate = 1.0 / self.fixed_step if self.fixed_step > 0.0 else least_steps(
+            self.model, self.tableau, 1.0, self.layout.turning)[0]
         self._session = ses.start(self.M, self.excitation, self.tableau, self.config, initial(self.layout, scene),
                                   float(t_start), np.uint64(self._fingerprint()), s.zeno_max_events)
         # the state's arrays are views on _memory, so that a step's backup and rollback are one copy each
@@ -190,7 +196,20 @@ class Solver:
         """Restore a state from get_state of a solver of the same scene and method; anything else, or a
         corrupted state, is refused with a StateError naming the field, and the solver keeps its own."""
         st.check(state, self.state, self.excitation.breaks.shape[0])
+        self._refuse_deep_apart(state)
         st.assign(self.state, state)
+
+    def _refuse_deep_apart(self, state: st.SolverState) -> None:
+        """A state whose pair overlaps deeper than a start may (MAX_OVERLAP_FRACTION of the smaller radius) while its
+        mode says apart was not reached by a solver: one that pressed that deep holds the pair in contact. Stepped,
+        the pair would fling its berries apart with energy nobody gave them, so it is refused as a start is."""
+        apart = state.physical.contacts["mode"] == 0
+        depth = np.where(apart, overlaps(state.physical.y, self.M), -np.inf)
+        hit = deepest_overlap(depth[None], MAX_OVERLAP_FRACTION * self.model.contact_radius)
+        if hit is not None:
+            _, p, delta, limit = hit
+            raise StateError(f"state physical.y: {self.model.overlap_words(p, delta, limit, 'given')}, while its "
+                             "contact mode says apart (not a state a solver reached); the solver keeps its own")
 
     @property
     def t(self) -> float:
@@ -294,10 +313,14 @@ class Solver:
 
         I = self.state.integrator
         t0, h = float(I.clock["t_prev"][0]), float(I.clock["h_last"][0])
+        if not h > 0.0:
+            raise SolverError("dense_output: no step taken yet (step(), advance() or run() first)")
         y0, q = I.y_prev.copy(), I.dense.copy()
 
         def y_of(t):
             th = (np.atleast_1d(np.asarray(t, dtype=float)) - t0) / h
+            if not np.all((th >= -1e-12) & (th <= 1.0 + 1e-12)):
+                raise SolverError(f"t: expected times in the last step, [{t0:.9g}, {t0 + h:.9g}] s, got {t!r}")
             out = np.empty((th.size, y0.size))
             for i, x in enumerate(th):
                 dense(x, y0, q, h, out[i])
@@ -341,6 +364,8 @@ class Solver:
             self._advance = entry(ses.advance, self._session, dt, held, a, omega_set, omega, self.max_steps)
         status, t_target, n_impacts = self._advance(self._session, dt, held, a, omega_set, omega, self.max_steps)
         if status == REFUSED:
+            if self.t + dt == self.t:
+                raise SolverError(f"dt: {dt!r} s does not move t = {self.t!r} s (below its resolution)")
             self._check_input(a, omega)
             raise SolverError(f"base_accel, angular_velocity: {a}, {omega} refused")  # _check_input said why
         while n_impacts:
@@ -361,9 +386,12 @@ class Solver:
         return int(counters["steps"][0]) - int(saved["steps"][0])
 
     def refuse_stiff(self, span: float) -> None:
-        """A SolverError, before a step, if the stiffest hinge alone needs more than max_steps over span
-        (stiffness.refuse_stiff, which names it); a test of one product when it does not."""
+        """A SolverError, before a step, if the stiffest hinge alone (stiffness.refuse_stiff, which names it) or the
+        fixed step needs more than max_steps over span; a test of one product when it does not."""
         if span * self._least_rate > self.max_steps:
+            if self.fixed_step > 0.0:
+                raise SolverError(f"fixed_step: {span:g} s in steps of {self.fixed_step:g} s is "
+                                  f"{span / self.fixed_step:.3g} steps, more than max_steps = {self.max_steps}")
             refuse_stiff(self.model, self.tableau, self.integrator, span, self.layout.turning, self.max_steps)
 
     def _check_input(self, a: tuple[float, ...], omega: tuple[float, float, float]) -> None:
@@ -413,8 +441,15 @@ class Solver:
         """Integrate from the current time to t_end, recording samples every output_interval. On failure
         the state is left as it was before the call."""
         s = self.scene.solver
-        t_end = s.t_end if t_end is None else float(t_end)
+        refuse_out_of_range(output_interval=output_interval)
         dt_out = s.output_interval if output_interval is None else float(output_interval)
+        t_end = s.t_end if t_end is None else t_end
+        if not (isinstance(t_end, Real) and not isinstance(t_end, bool) and
+                0.0 <= t_end - self.t <= bound(SolverSettings, "t_end").hi):
+            raise SolverError(f"t_end: expected a time from the solver's t = {self.t:.9g} s to "
+                              f"{bound(SolverSettings, 't_end').hi:g} s after it, got {t_end!r}")
+        t_end = float(t_end)
+        check_samples(self.model, t_end - self.t, dt_out, "t_end", "output_interval")
         self.refuse_stiff(t_end - self.t)
         self._save()
         t_start = self.t
@@ -513,10 +548,21 @@ def tableau(integrator: str) -> Tableau:
     return {"DOPRI5": DOPRI5, "DOP853": DOP853, "ode23": BOGACKI_SHAMPINE}[integrator]
 
 
+def refuse_out_of_range(**given) -> None:
+    """A SolverError naming the first argument given (not None) outside the range a scene file's [solver] table holds
+    its key to (SolverSettings)."""
+    for name, x in given.items():
+        b = bound(SolverSettings, name)
+        kind = Integral if name == "max_steps" else Real
+        if x is not None and (isinstance(x, bool) or not isinstance(x, kind) or not b.holds(float(x))):
+            raise SolverError(f"{name}: expected {'an integer' if kind is Integral else 'a number'}"
+                              f"{b.allowed[len('a number'):]}, got {x!r}")
+
+
 def _step_size(dt) -> float:
     """dt as a float, or a SolverError: the checks behind advance's inline one, with the message."""
     try:
-        ok = not isinstance(dt, bool) and isinstance(dt, (int, float)) and math.isfinite(float(dt)) and dt > 0
+        ok = not isinstance(dt, bool) and isinstance(dt, Real) and math.isfinite(float(dt)) and dt > 0
     except OverflowError:
         ok = False
     if not ok:
