@@ -587,3 +587,30 @@ def test_an_interruption_a_library_turned_into_another_error_still_ends_as_one(m
     assert code == 130, err
     assert "interrupted" in err and "run the same command again" in err
     cli._received.clear()
+
+
+def test_a_reference_run_shows_progress_and_a_summary_without_blanks(tmp_path, capsys):
+    """`simulate --method reference` showed no progress on a 33 s run (simulate did not hand its callback to the
+    reference), and its summary printed '- steps' and 'nan near pairs per step' for counts only the event solver
+    keeps (an audit)."""
+    from grapefmu.cli import main
+    from grapefmu.solver.api import simulate
+    assert main(["cluster", "--row", "--berries", "3", "-o", str(tmp_path / "row.toml")]) == 0
+    capsys.readouterr()
+    seen = []
+    simulate(load_scene(tmp_path / "row.toml"), 0.05, method="reference", progress=lambda t, te: seen.append((t, te)))
+    assert seen[0] == (0.0, 0.05) and seen[-1] == (0.05, 0.05) and seen == sorted(seen)
+    assert main(["simulate", str(tmp_path / "row.toml"), "--method", "reference", "--t-end", "0.05"]) == 0
+    out = capsys.readouterr().out  # (the bar itself shows after a second of running: Progress)
+    assert " - " not in out and "nan" not in out and "scene row: 3 berries, 3 contact pairs" in out
+    kept = next(line for line in out.splitlines() if line.strip().startswith("kept"))
+    assert "degrees of freedom" not in kept and "at most" in kept
+
+
+def test_one_file_given_twice_as_out_is_written_once(tmp_path, capsys, monkeypatch):
+    """--out a.csv --out ./a.csv wrote the same file twice (an audit)."""
+    from grapefmu.cli import main
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", "--t-end", "0.01", "--out", "a.csv", "--out", "./a.csv", "--out", "b.csv"]) == 0
+    assert [line for line in capsys.readouterr().out.splitlines() if line.startswith("wrote")] == \
+        ["wrote a.csv", "wrote b.csv"]
