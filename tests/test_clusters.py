@@ -372,3 +372,25 @@ def test_islands_hold_a_run_to_its_step_limit_as_one_solver_does():
     with pytest.raises(SolverError, match=r"step limit was reached.*in contact when it stopped: b\d+_b\d+ "
                        r"\(kelvin-voigt: stiffness 2e\+03 N/m, damping 1e\+04 N·s/m; m = 0.0055 kg, m/c = 5.5e-07 s"):
         Islands(pressed, max_steps=3000).run()
+
+
+def test_an_islands_run_keeps_few_systems_out_of_use_and_its_results_do_not_depend_on_them(monkeypatch):
+    """Under sustained shaking nearly every island has a shape of its own, and the pool of systems out of use kept
+    every one: a 100-berry cluster shaken at 4 Hz held 4.1 GB after 30 s, against 0.6 GB in one step size (an audit).
+    The pool now keeps FREE_SYSTEMS, the least recently used shape dropped first, and a retired island keeps no
+    system. A pool of two and one of any size give the same run bit for bit (a reused system is loaded afresh)."""
+    from grapefmu.solver import islands
+    doc = cluster_scene(ClusterSpec(berries=20, seed=1))
+    doc["excitation"] = {"kind": "sine", "amplitude": [6.0, 3.6, 2.4], "frequency": 4.1, "start": 0.0, "duration": 10.0}
+    doc["solver"] = {"rtol": 1e-6, "t_end": 0.5, "output_interval": 1e-3}
+    sc = scene_from_dict(doc, Path.cwd())
+    runs = {}
+    for cap in (2, 10**6):
+        monkeypatch.setattr(islands, "FREE_SYSTEMS", cap)
+        isl = Islands(sc)
+        runs[cap] = isl.run()
+        kept = sum(len(pool) for pool in isl.free.values())
+        assert kept == isl.n_free <= cap and all(seg.system is None for seg in isl.segments)
+        assert isl.formed > 20
+    np.testing.assert_array_equal(runs[2].y, runs[10**6].y)
+    np.testing.assert_array_equal(runs[2].impacts.records(), runs[10**6].impacts.records())
