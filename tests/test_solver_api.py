@@ -379,7 +379,9 @@ def test_settings_a_scene_file_could_not_hold_are_refused_by_solver_and_simulate
 
 
 @pytest.mark.parametrize("kwargs, words", [(dict(max_steps=0), r"max_steps: expected an integer in \[1, 1e\+12\]"),
-                                           (dict(t_start=float("nan")), "t_start: expected a finite time")])
+                                           (dict(t_start=float("nan")), "t_start: expected a finite time"),
+                                           (dict(t_start=10**400), "t_start"), (dict(rtol=10**400), "rtol"),
+                                           (dict(max_steps=10**400), "max_steps")])
 def test_a_step_limit_or_start_time_out_of_range_is_refused(collision_scene, kwargs, words):
     with pytest.raises(SolverError, match=words):
         Solver(collision_scene, **kwargs)
@@ -402,7 +404,7 @@ def test_a_nan_step_size_ends_the_loop_instead_of_rejecting_forever(tmp_path):
 
 @pytest.mark.parametrize("args, words", [
     ((-1.0,), "t_end: expected a time from the solver's t = 0.5 s"), ((float("nan"),), "t_end"),
-    ((float("inf"),), "t_end"), (("0.9",), "t_end"), ((0.2,), "t_end"),
+    ((float("inf"),), "t_end"), (("0.9",), "t_end"), ((0.2,), "t_end"), ((10**400,), "t_end"),
     ((0.9, 0.0), r"output_interval: expected a number in \[1e-06, 100000\] s, got 0.0"),
     ((0.9, float("inf")), "output_interval"), ((0.9, float("nan")), "output_interval"),
     ((5e4, 1e-6), "t_end, output_interval: .* GiB of memory"),

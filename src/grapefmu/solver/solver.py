@@ -118,7 +118,7 @@ class Solver:
             raise SolverError(f"method: Solver runs 'event' or 'paper', got {self.method!r} "
                               "(simulate() runs 'reference')")
         refuse_out_of_range(rtol=rtol, atol=atol, fixed_step=fixed_step, max_steps=max_steps)
-        if not (isinstance(t_start, Real) and not isinstance(t_start, bool) and math.isfinite(t_start)):
+        if _finite(t_start) is None:
             raise SolverError(f"t_start: expected a finite time in s, got {t_start!r}")
         self.rtol = float(rtol) if rtol is not None else s.rtol
         self.atol = float(atol) if atol is not None else s.atol
@@ -443,12 +443,11 @@ class Solver:
         s = self.scene.solver
         refuse_out_of_range(output_interval=output_interval)
         dt_out = s.output_interval if output_interval is None else float(output_interval)
-        t_end = s.t_end if t_end is None else t_end
-        if not (isinstance(t_end, Real) and not isinstance(t_end, bool) and
-                0.0 <= t_end - self.t <= bound(SolverSettings, "t_end").hi):
+        end = _finite(s.t_end if t_end is None else t_end)
+        if end is None or not 0.0 <= end - self.t <= bound(SolverSettings, "t_end").hi:
             raise SolverError(f"t_end: expected a time from the solver's t = {self.t:.9g} s to "
                               f"{bound(SolverSettings, 't_end').hi:g} s after it, got {t_end!r}")
-        t_end = float(t_end)
+        t_end = end
         check_samples(self.model, t_end - self.t, dt_out, "t_end", "output_interval")
         self.refuse_stiff(t_end - self.t)
         self._save()
@@ -554,20 +553,28 @@ def refuse_out_of_range(**given) -> None:
     for name, x in given.items():
         b = bound(SolverSettings, name)
         kind = Integral if name == "max_steps" else Real
-        if x is not None and (isinstance(x, bool) or not isinstance(x, kind) or not b.holds(float(x))):
+        if x is not None and (not isinstance(x, kind) or _finite(x) is None or not b.holds(_finite(x))):
             raise SolverError(f"{name}: expected {'an integer' if kind is Integral else 'a number'}"
                               f"{b.allowed[len('a number'):]}, got {x!r}")
 
 
+def _finite(x) -> float | None:
+    """x as a finite float, or None for anything else: a bool, a string, NaN, ±inf, an int beyond a float's range."""
+    if isinstance(x, bool) or not isinstance(x, Real):
+        return None
+    try:
+        v = float(x)
+    except OverflowError:
+        return None
+    return v if math.isfinite(v) else None
+
+
 def _step_size(dt) -> float:
     """dt as a float, or a SolverError: the checks behind advance's inline one, with the message."""
-    try:
-        ok = not isinstance(dt, bool) and isinstance(dt, Real) and math.isfinite(float(dt)) and dt > 0
-    except OverflowError:
-        ok = False
-    if not ok:
+    v = _finite(dt)
+    if v is None or not v > 0.0:
         raise SolverError(f"dt: expected a finite step > 0 s, got {dt!r}")
-    return float(dt)
+    return v
 
 
 _NO_ACCEL = (0.0,) * 6
