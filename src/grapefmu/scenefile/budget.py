@@ -3,6 +3,7 @@ in range but together would exhaust the machine are refused with the estimate be
 (the samples a run records are checked by grapefmu.solver.budget, which knows their size)."""
 from __future__ import annotations
 
+import functools
 import os
 
 from ..errors import SceneError
@@ -13,8 +14,10 @@ MEMORY_FRACTION = 0.5
 STATE_COPIES = 2
 
 
+@functools.cache
 def memory_limit() -> int:
-    """Bytes one run may plan to use: MEMORY_FRACTION of the physical memory (of 32 GiB if it cannot be read)."""
+    """Bytes one run may plan to use: MEMORY_FRACTION of the physical memory (of 32 GiB if it cannot be read), read
+    once: it does not change while the process runs, and every run asks."""
     try:
         total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (ValueError, OSError, AttributeError):
