@@ -63,6 +63,29 @@ def test_cost_interpolation_and_failures():
     assert math.isnan(cost_at(rows, 1e-10))  # never reached: not extrapolated
 
 
+def test_cost_is_not_interpolated_across_a_setting_that_missed_a_contact():
+    """The pick-and-place scene's scipy DOP853 lean ladder in the report of 2026-11-29: rtol 1e-7 caught all five
+    impacts (6.7e-6 rad), 1e-8 and 1e-9 missed one (1.6e-2 rad), 1e-10 caught them (2.5e-10 rad). Sorted by error,
+    1e-7 and 1e-10 bracketed 1e-6 rad (7.76 ms), a cost its neighbours in between do not reach it at; the cheapest
+    setting that reaches it is 1e-10."""
+    def row(rtol, cost, err, impacts):
+        return Row("pick and place", "scipy DOP853 lean", f"rtol {rtol:g}", cost, err, 0.0, impacts, 5, 0.0, 0.0, 100)
+    rows = [row(1e-10, 10.423e-3, 2.52e-10, 5), row(1e-6, 6.057e-3, 1.58e-2, 4), row(1e-7, 7.256e-3, 6.67e-6, 5),
+            row(1e-8, 7.563e-3, 1.58e-2, 4), row(1e-9, 8.426e-3, 1.58e-2, 4), row(1e-11, 11.849e-3, 2.37e-11, 5)]
+    assert cost_at(rows, 1e-6) == 10.423e-3
+    # grazing, scipy RK45 lean: two runs that missed all three impacts tie on error; neither is a point of the curve
+    graze = [Row("grazing", "m", f"rtol {r:g}", c, e, 0.0, n, 3, 0.0, 0.0, 100) for r, c, e, n in
+             ((1e-4, 1.974e-3, 8.085e-4, 0), (1e-6, 4.833e-3, 8.085e-4, 0), (1e-8, 14.478e-3, 5.17e-8, 3),
+              (1e-10, 31.531e-3, 4.97e-10, 3))]
+    assert cost_at(graze, 1e-6) == 14.478e-3
+    w = math.log(1e-9 / 4.97e-10) / math.log(5.17e-8 / 4.97e-10)  # between two good neighbours: log-log as before
+    assert math.isclose(cost_at(graze, 1e-9), 31.531e-3 * (14.478e-3 / 31.531e-3) ** w, rel_tol=1e-12)
+    # a tighter setting that is cheaper than the interpolation (a non-monotone curve): its measured cost
+    bumpy = [Row("s", "m", f"rtol {r:g}", c, e, 0.0, 1, 1, 0.0, 0.0, 10) for r, c, e in
+             ((1e-5, 0.195e-3, 5.31e-6), (1e-6, 0.180e-3, 9.12e-7))]
+    assert cost_at(bumpy, 1e-6) == 0.180e-3
+
+
 @pytest.fixture(scope="module")
 def collision():
     """The paper collision scene and grapefmu's event solver on it at rtol 1e-12 (the independent check's other side)."""
