@@ -63,6 +63,37 @@ def test_cost_interpolation_and_failures():
     assert math.isnan(cost_at(rows, 1e-10))  # never reached: not extrapolated
 
 
+def test_methods_are_timed_in_rounds_that_run_each_once_and_keep_its_fastest():
+    """The harness interleaves: each round runs every method once, in turn; a method keeps its fastest round, sits
+    out the rounds after its runs took more than the budget, and one that fails says so and runs no more."""
+    import time
+
+    from grapefmu.bench.methods import Outcome, interleaved
+    from grapefmu.errors import GrapefmuError
+
+    calls = []
+
+    def method(name, sleeps=(), fail_at=None):
+        def fn():
+            k = sum(c == name for c in calls)
+            calls.append(name)
+            if k == fail_at:
+                raise GrapefmuError("gave up")
+            time.sleep(sleeps[k] if k < len(sleeps) else 0.0)
+            return Outcome(rhs=k)
+        return fn
+
+    fast_late = method("a", sleeps=(0.04, 0.03, 0.01, 0.03))
+    slow = method("b", sleeps=(0.1,) * 5)
+    failing = method("c", fail_at=1)
+    out = interleaved([fast_late, slow, failing], repeats=3, budget=0.25)
+    assert calls == ["a", "b", "c", "a", "b", "c", "a", "b", "a"]  # b sits out once its runs took 0.3 s > 0.25
+    (oa, ta), (ob, tb), (oc, tc) = out
+    assert 0.01 <= ta < 0.03 and oa.failure is None  # its second round, not its warm-up or the others
+    assert 0.1 <= tb < 0.15 and ob.failure is None
+    assert oc.failure and "gave up" in oc.failure and math.isnan(tc)
+
+
 def test_cost_is_not_interpolated_across_a_setting_that_missed_a_contact():
     """The pick-and-place scene's scipy DOP853 lean ladder in the report of 2026-11-29: rtol 1e-7 caught all five
     impacts (6.7e-6 rad), 1e-8 and 1e-9 missed one (1.6e-2 rad), 1e-10 caught them (2.5e-10 rad). Sorted by error,

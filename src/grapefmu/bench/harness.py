@@ -5,7 +5,8 @@ committed docs/benchmarks.md and docs/bench are regenerated with --out docs/benc
 Protocol (issue 5): reference = grapefmu at rtol 1e-13 checked against scipy DOP853 with events at 1e-13
 (must agree to 1e-10 rad, or the scene is refused); error = largest angle error on the 1 ms grid, final
 state error, impact count, impact-time and peak-force error; cost = wall time per simulated second, the
-minimum of several runs after a warm-up (numba compile measured separately), and right-hand-side
+minimum of several rounds that run each method and setting of a scene once in turn, after a warm-up round (numba
+compile measured separately), and right-hand-side
 evaluations with their floor (evaluations × a bare compiled evaluation's cost on the scene's states,
 bench/costs.py). The paper collision scene is also stepped from a face: advance(1 ms) against one run.
 A failed run is a row that says why."""
@@ -13,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import functools
 import json
 import math
 import os
@@ -184,18 +186,19 @@ def run(quick: bool = False, repeats: int = 5, budget: float = 20.0, log=print):
         per_rhs = rhs_seconds(ref)
         rhs_ns[name] = 1e9 * per_rhs
         log(f"[{name}] bare RHS evaluation on the reference's states: {1e9 * per_rhs:.0f} ns")
-        for method, settings, fn, label in plan(quick):
-            for v in settings:
-                if method.startswith("MuJoCo") and t_end / v > 3e6:
-                    continue
-                out, wall = M.timed(lambda: fn(sc, v), 1 if quick else repeats, budget)
-                rows.append(metrics(name, method, f"{label} {v:g}", out, wall, ref, t_end))
-                r = rows[-1]
-                if method.startswith(OWN_RHS) and r.rhs:
-                    r.floor = r.rhs * per_rhs / t_end
-                log(f"[{name}] {method} {label}={v:g}: " + (f"FAILED {r.failure}" if r.failure else
-                    f"error {r.error:.2e} rad, {1e3 * r.cost:.3f} ms per simulated s"
-                    + (f", {r.over_floor:.1f}× its RHS floor" if r.floor > 0 else "")))
+        jobs = [(method, label, v, fn) for method, settings, fn, label in plan(quick) for v in settings
+                if not (method.startswith("MuJoCo") and t_end / v > 3e6)]
+        log(f"[{name}] {len(jobs)} methods and settings, interleaved over {1 if quick else repeats} rounds ...")
+        timings = M.interleaved([functools.partial(fn, sc, v) for _, _, v, fn in jobs], 1 if quick else repeats,
+                                budget)
+        for (method, label, v, _), (out, wall) in zip(jobs, timings):
+            rows.append(metrics(name, method, f"{label} {v:g}", out, wall, ref, t_end))
+            r = rows[-1]
+            if method.startswith(OWN_RHS) and r.rhs:
+                r.floor = r.rhs * per_rhs / t_end
+            log(f"[{name}] {method} {label}={v:g}: " + (f"FAILED {r.failure}" if r.failure else
+                f"error {r.error:.2e} rad, {1e3 * r.cost:.3f} ms per simulated s"
+                + (f", {r.over_floor:.1f}× its RHS floor" if r.floor > 0 else "")))
         if not quick:
             out, wall = M.fmu_fmpy(sc)
             row = metrics(name, "FMU via fmpy", "1 ms steps", out, wall, ref, t_end)
@@ -263,7 +266,9 @@ def markdown(rows, refused, compile_s, command, plots, quick, rhs_ns, adv: Advan
     f = _fmt
     lines = ["# Benchmarks: speed against error", "",
              f"Every figure below comes from `{command}` (date {datetime.date.today()}, machine: {machine()}).",
-             "Cost: wall time per simulated second, the minimum of up to 5 runs after a warm-up; error: largest "
+             "Cost: wall time per simulated second, the minimum of up to 5 rounds after a warm-up round, each round "
+             "running every method and setting of the scene once in turn (interleaved, as issue 14 measures); error: "
+             "largest "
              "twig-angle error on a 1 ms grid against grapefmu at rtol 1e-13, which must agree with scipy DOP853 with "
              "events at 1e-13 to 1e-10 rad or the scene is refused. RHS floor: the method's right-hand-side "
              "evaluations × one bare compiled evaluation on the scene's states (below); methods with their own "

@@ -115,24 +115,36 @@ def mujoco_run(scene, integrator, dt):
     return Outcome(angles, np.r_[data.qpos[:n], data.qvel[:n]], None, math.nan, steps * (4 if integrator == "RK4" else 1))
 
 
-def timed(fn, repeats: int, budget: float):
-    """Warm-up run, then the minimum wall time of up to `repeats` runs (fewer if they exceed the budget)."""
+def _once(fn) -> tuple[Outcome, float]:
+    """fn's outcome and wall time; a failure it raises becomes an outcome that says why."""
     try:
         t = time.perf_counter()
         out = fn()
-        first = time.perf_counter() - t
-        if out.failure:
-            return out, first
-        times = [first]
-        for _ in range(repeats):
-            if sum(times) > budget:
-                break
-            t = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t)
-        return out, min(times[1:] or times)
+        return out, time.perf_counter() - t
     except (GrapefmuError, FloatingPointError, ValueError, RuntimeError) as e:
         return Outcome(failure=f"{type(e).__name__}: {str(e)[:120]}"), math.nan
+
+
+def interleaved(fns, repeats: int, budget: float) -> list[tuple[Outcome, float]]:
+    """Each fn's outcome and wall time: a warm-up round, then up to `repeats` rounds that run every fn once in turn,
+    the minimum of its rounds (its warm-up's time if it sat them out: a fn sits out the rounds left once its runs
+    took more than `budget` seconds in all, and every round after a failure). Interleaved, as the issue measures:
+    back to back, a sub-millisecond compiled run is timed in a state of the caches that only its own repetition
+    leaves (about 1.5× faster on the paper collision than right after a scipy run; docs/bench_notes.md)."""
+    first = [_once(fn) for fn in fns]
+    spent = [t for _, t in first]
+    best = [math.inf] * len(fns)
+    for _ in range(repeats):
+        for k, fn in enumerate(fns):
+            if first[k][0].failure or not spent[k] <= budget:
+                continue
+            out, t = _once(fn)
+            if out.failure:
+                first[k] = (out, t)
+                continue
+            spent[k] += t
+            best[k] = min(best[k], t)
+    return [(out, t if out.failure or best[k] == math.inf else best[k]) for k, (out, t) in enumerate(first)]
 
 
 def fmu_fmpy(scene):
