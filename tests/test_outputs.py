@@ -164,6 +164,25 @@ def test_a_run_off_its_output_grid_ends_with_a_sample_at_its_end():
         np.testing.assert_allclose(other.angles[-1], r.angles[-1], atol=1e-6)
 
 
+@pytest.mark.parametrize("t_end", [1e-300, 1e-13])
+def test_a_run_shorter_than_a_rounding_of_its_output_interval_ends_with_a_sample_at_its_end(t_end):
+    """A run shorter than 1e-9 of its output interval (grid_last's tolerance for an end just past a grid point) had
+    only its start's sample: `grapefmu simulate --t-end 1e-300` said "simulated 0 s". Its last sample is now its end,
+    on every path: one step size, islands, the scipy reference, and groups run apart (run_by_group); a run of no
+    length keeps its one sample."""
+    sc = scene(dual(solver={"output_interval": 0.01}))
+    apart = scene(dual(d0=0.2))  # berries that cannot reach each other: two groups
+    solver = Solver(sc)
+    r = solver.run(t_end)
+    assert list(r.t) == [0.0, t_end] and r.summary()["t_end_s"] == t_end
+    np.testing.assert_allclose(r.y[-1], solver.y, rtol=1e-12, atol=0.0)  # the dense output at the step's end
+    runs = (Islands(sc).run(t_end), simulate(sc, t_end, method="reference"), simulate(apart, t_end))
+    assert runs[2].stats["groups"] == 2
+    for other in runs:
+        assert list(other.t) == [0.0, t_end]
+    assert list(Solver(sc).run(0.0).t) == [0.0]
+
+
 def test_the_foxglove_layout_is_current_and_names_only_recorded_topics(run, tmp_path):
     import json
     from grapefmu.recording import foxglove

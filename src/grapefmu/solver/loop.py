@@ -87,9 +87,11 @@ def differs(c, d):
 def grid_last(t0, t, dt, at_end):
     """The index of the last sample at or before t on the output grid t0 + k dt; at the run's end (at_end) past its
     last grid point, one more: the end's own sample (record_grid clamps its time to the end). Why: a run to
-    0.0995 s sampled every 0.01 s ended its samples at 0.09 s, and its summary read its end and its energy there."""
+    0.0995 s sampled every 0.01 s ended its samples at 0.09 s, and its summary read its end and its energy there.
+    An end within 1e-9 dt past a grid point is sampled at that point (no sample a rounding apart), but not when that
+    point is the start, t0: a run shorter than 1e-9 dt (to 1e-300 s) would have only its start's sample."""
     k = int(math.floor((t - t0) / dt + 1e-9))
-    if at_end and t0 + k * dt < t - 1e-9 * dt:
+    if at_end and (t0 + k * dt < t - 1e-9 * dt or (k == 0 and t > t0)):
         k += 1
     return k
 
