@@ -157,19 +157,27 @@ class Solver:
         self.state, self._memory, self._backup = ses.views(self._session)
         self._contact_flags = (self.state.physical.contacts["mode"], self.state.physical.contacts["smooth"])  # touching
         if self._contact_flags[0].any():
-            self._refuse_deep_start()
+            self._refuse_deep(self.state.physical.y)
         self._snapshot: catalogue.Snapshot | None = None  # made by the first snapshot()
 
-    def _refuse_deep_start(self) -> None:
-        """A start in contact may overlap by at most MAX_OVERLAP_FRACTION of the smaller radius, however the scene was
-        built: deeper, a contact law means nothing and the pair is flung apart with energy nobody gave it (a scene
-        file says so on its own keys, scenefile.parse)."""
-        hit = deepest_overlap(overlaps(self.state.physical.y, self.M)[None],
-                              MAX_OVERLAP_FRACTION * self.model.contact_radius)
+    def _refuse_deep(self, y: np.ndarray, apart: np.ndarray | None = None) -> None:
+        """Refuse a state y whose pairs overlap by more than MAX_OVERLAP_FRACTION of the smaller radius: deeper, a
+        contact law means nothing and the pair is flung apart with energy nobody gave it. Without `apart`, y is the
+        start, however the scene was built (a scene file says so on its own keys, scenefile.parse): a SceneError on
+        the scene's key. With it (a bool per pair, its mode apart), y is a state given to set_state, and only its
+        pairs apart count: a solver that pressed that deep holds the pair in contact, so one apart was not reached
+        by a solver: a StateError."""
+        depth = overlaps(y, self.M)
+        if apart is not None:
+            depth = np.where(apart, depth, -np.inf)
+        hit = deepest_overlap(depth[None], MAX_OVERLAP_FRACTION * self.model.contact_radius)
         if hit is None:
             return
         _, p, delta, limit = hit
         m = self.model
+        if apart is not None:
+            raise StateError(f"state physical.y: {m.overlap_words(p, delta, limit, 'given')}, while its contact mode "
+                             "says apart (not a state a solver reached); the solver keeps its own")
         pr, nb = m.pairs[p], m.n_berries
         key = f"obstacles[{pr.j - nb}].point" if pr.j >= nb else f"angles[{m.dof[pr.j]}]"
         raise SceneError(key, m.overlap_words(p, delta, limit, "initial"))
@@ -196,20 +204,8 @@ class Solver:
         """Restore a state from get_state of a solver of the same scene and method; anything else, or a
         corrupted state, is refused with a StateError naming the field, and the solver keeps its own."""
         st.check(state, self.state, self.excitation.breaks.shape[0])
-        self._refuse_deep_apart(state)
+        self._refuse_deep(state.physical.y, state.physical.contacts["mode"] == 0)
         st.assign(self.state, state)
-
-    def _refuse_deep_apart(self, state: st.SolverState) -> None:
-        """A state whose pair overlaps deeper than a start may (MAX_OVERLAP_FRACTION of the smaller radius) while its
-        mode says apart was not reached by a solver: one that pressed that deep holds the pair in contact. Stepped,
-        the pair would fling its berries apart with energy nobody gave them, so it is refused as a start is."""
-        apart = state.physical.contacts["mode"] == 0
-        depth = np.where(apart, overlaps(state.physical.y, self.M), -np.inf)
-        hit = deepest_overlap(depth[None], MAX_OVERLAP_FRACTION * self.model.contact_radius)
-        if hit is not None:
-            _, p, delta, limit = hit
-            raise StateError(f"state physical.y: {self.model.overlap_words(p, delta, limit, 'given')}, while its "
-                             "contact mode says apart (not a state a solver reached); the solver keeps its own")
 
     @property
     def t(self) -> float:
