@@ -378,7 +378,9 @@ def test_an_islands_run_keeps_few_systems_out_of_use_and_its_results_do_not_depe
     """Under sustained shaking nearly every island has a shape of its own, and the pool of systems out of use kept
     every one: a 100-berry cluster shaken at 4 Hz held 4.1 GB after 30 s, against 0.6 GB in one step size (an audit).
     The pool now keeps FREE_SYSTEMS, the least recently used shape dropped first, and a retired island keeps no
-    system. A pool of two and one of any size give the same run bit for bit (a reused system is loaded afresh)."""
+    system. A pool of two and one of any size give the same run bit for bit (a reused system is loaded afresh). The
+    count of systems out of use is the pool's own (it was a counter kept beside it, which a caller's emptying the pool
+    left at its old value: the next run then dropped systems it had room for)."""
     from grapefmu.solver import islands
     doc = cluster_scene(ClusterSpec(berries=20, seed=1))
     doc["excitation"] = {"kind": "sine", "amplitude": [6.0, 3.6, 2.4], "frequency": 4.1, "start": 0.0, "duration": 10.0}
@@ -392,5 +394,10 @@ def test_an_islands_run_keeps_few_systems_out_of_use_and_its_results_do_not_depe
         kept = sum(len(pool) for pool in isl.free.values())
         assert kept == isl.n_free <= cap and all(seg.system is None for seg in isl.segments)
         assert isl.formed > 20
+    isl.free.clear()  # a caller releasing the pool's memory
+    assert isl.n_free == 0
+    again = isl.run()
+    assert 0 < isl.n_free == sum(len(pool) for pool in isl.free.values())
+    np.testing.assert_array_equal(again.y, runs[10**6].y)
     np.testing.assert_array_equal(runs[2].y, runs[10**6].y)
     np.testing.assert_array_equal(runs[2].impacts.records(), runs[10**6].impacts.records())

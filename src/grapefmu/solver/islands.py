@@ -46,9 +46,9 @@ K = 5
 JOIN = 5e-4
 STAY = 5e-3
 #: systems out of use kept for islands of their shape to come, the least recently used dropped first: each holds its
-#: model, state and a window's recorder (about 2 MB at 100 berries). Under sustained shaking nearly every island has
-#: a shape of its own, and a pool that kept them all grew by 140 MB a simulated second (4.1 GB in a 30 s run of a
-#: 100-berry cluster, against 0.6 GB in one step size); gentle motion reuses a few shapes, which this keeps
+#: model, state and a window's recorder. Under sustained shaking nearly every island has a shape of its own, and a pool
+#: that kept them all grew with every window for as long as the run went on (docs/solver.md, "Islands": the memory
+#: measured, and the command that measures it); gentle motion reuses a few shapes, which this keeps
 FREE_SYSTEMS = 64
 
 
@@ -162,8 +162,12 @@ class Islands:
         self.coupled = np.array([(c.i, c.j) for c in m.couplings], dtype=int).reshape(-1, 2)
         self.dof = m.dof
         self.free: dict[tuple[int, ...], list[_System]] = {}  # systems out of use, by shape, least recently used first
-        self.n_free = 0
         self.local = np.zeros(self.n + len(m.obstacles), dtype=np.int64)  # scratch: scene body -> island's
+
+    @property
+    def n_free(self) -> int:
+        """The systems in the pool (at most FREE_SYSTEMS + 1 of them in as many shapes: a sum of few lengths)."""
+        return sum(len(pool) for pool in self.free.values())
 
     # --- the state between islands (scene indices) ----------------------------------------------------------
     def _start(self) -> None:
@@ -207,11 +211,9 @@ class Islands:
         pool = self.free.pop(system.shape, [])
         pool.append(system)
         self.free[system.shape] = pool  # its shape now the most recently used
-        self.n_free += 1
         while self.n_free > FREE_SYSTEMS:
             oldest = next(iter(self.free))
             self.free[oldest].pop(0)
-            self.n_free -= 1
             if not self.free[oldest]:
                 del self.free[oldest]
 
@@ -230,7 +232,6 @@ class Islands:
             # allocator hands back, where room for the rest of the run was fresh pages, faulted in for every system
             if pool:
                 system = pool.pop()
-                self.n_free -= 1
                 if not pool:
                     del self.free[shape]
             else:
