@@ -127,14 +127,17 @@ def check_row_spacing(t: np.ndarray, path: str, key: str) -> None:
     refuses as a step below the resolution of time, a reason about stiffness that names no key (it once took 10⁷
     steps of 0 s to the step limit). A first row after 0 s is held as far from the run's start (the table is zero
     before it). A table sampled at 1 kHz or 10 kHz is ten orders of magnitude clear of the floor; one 1e-20 s apart
-    that happened to run is refused too: no recorded signal is sampled at 6e13 Hz."""
+    that happened to run is refused too: no recorded signal is sampled at 6e13 Hz. A time repeated on the next row
+    is one breakpoint (a staircase's doubled knot: zero_order_hold); a time before the row above's is refused."""
+    rows = np.flatnonzero(np.concatenate([[True], np.diff(t) != 0.0]))  # each breakpoint's first row
+    t = t[rows]
     start = np.concatenate([[0.0], t[:-1]]) if t[0] > 0.0 else t[:-1]
     end = t if t[0] > 0.0 else t[1:]
     least = TIME_RESOLUTION * np.maximum(1.0, start)
     bad = np.flatnonzero(end - start < least)
     if bad.size:
         k = int(bad[0])
-        row = k + 1 if t[0] > 0.0 else k + 2  # the later row, counted from 1 as the other errors count them
+        row = int(rows[k if t[0] > 0.0 else k + 1]) + 1  # the later row, counted from 1 as the other errors count them
         what = "the run's start" if t[0] > 0.0 and k == 0 else f"row {row - 1}'s {float(start[k])!r} s"
         raise SceneError(key, f"{path} row {row} column time: {float(end[k])!r} s is {end[k] - start[k]:.3g} s after "
                               f"{what}; rows must be at least {least[k]:.3g} s apart ({TIME_RESOLUTION:g} s per "

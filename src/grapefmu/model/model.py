@@ -18,7 +18,7 @@ import numpy as np
 from .bounds import Bound, bound, bounded, refusal
 from .contact import ContactLaw
 from ..errors import SceneError
-from .excitation import TABLE, Excitation, constant, rotation_matrix
+from .excitation import TABLE, Excitation, check_row_spacing, constant, rotation_matrix
 
 
 @dataclass(frozen=True)
@@ -533,9 +533,18 @@ class Scene:
         return None
 
     def refuses_excitation(self) -> tuple[str, str] | None:
-        X = self.excitation.arrays
+        """(key, why) for a value of the excitation that is not finite, or a table (made in code: excitation.table,
+        pick_and_place, not only read from a file) whose rows come closer than the solver steps (check_row_spacing,
+        naming the row and the spacing allowed, before a run stops at the step floor naming no key); or None."""
+        ex = self.excitation
+        X = ex.arrays
         if not (np.isfinite(X.par).all() and np.isfinite(X.table).all()):
-            return ("excitation", f"every value of the {self.excitation.kind} excitation must be a finite number")
+            return ("excitation", f"every value of the {ex.kind} excitation must be a finite number")
+        if X.kind == TABLE:
+            try:
+                check_row_spacing(X.table[:, 0], f"the {ex.kind} excitation's table", ex.key)
+            except SceneError as e:
+                return (e.key, e.why)
         return None
 
     @cached_property
