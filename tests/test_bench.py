@@ -122,6 +122,14 @@ def test_cost_is_not_interpolated_across_a_setting_that_missed_a_contact():
     assert cost_at(rk4, 1e-6) == 6.067e-3 and math.isnan(cost_at(rk4, 1e-10))
     fmu = [Row("paper collision", "FMU via fmpy", "1 ms steps", 15.8e-3, 7.2e-10, math.nan, None, 3, 0.0, 0.0, None)]
     assert cost_at(fmu, 1e-6) == 15.8e-3
+    # a floor or a ratio is read where the cost is cheapest, not at its own least: the report of 2026-12-01 gave the
+    # scipy driver's wall / floor at 1e-6 rad as its tightest setting's (the same figure as at 1e-10 rad)
+    ladder = [Row("s", "scipy", f"rtol {r:g}", c, e, 0.0, 1, 1, 0.0, 0.0, 100, floor=fl) for r, c, e, fl in
+              ((1e-5, 4e-3, 1e-7, 0.02e-3), (1e-12, 14e-3, 1e-12, 0.09e-3))]
+    assert cost_at(ladder, 1e-6, key=lambda r: r.over_floor) == 4e-3 / 0.02e-3
+    assert cost_at(ladder, 1e-6, key=lambda r: r.floor) == 0.02e-3
+    w = math.log(1e-10 / 1e-12) / math.log(1e-7 / 1e-12)
+    assert math.isclose(cost_at(ladder, 1e-10, key=lambda r: r.floor), 0.09e-3 * (0.02 / 0.09) ** w, rel_tol=1e-12)
 
 
 @pytest.fixture(scope="module")

@@ -107,36 +107,39 @@ def _setting(r: Row) -> float:
 
 
 def cost_at(rows: list[Row], target: float = 1e-6, key=lambda r: r.cost) -> float:
-    """Wall time per simulated second (or `key` of the row) at `target` error on the method's work–precision curve:
-    its settings in the order of the ladder (loosest first), the cheapest of a setting whose error is at most
-    `target` and a log-log interpolation between two neighbouring settings whose errors bracket it. A setting that
-    failed, or that booked another number of impacts than the reference (a missed or extra contact: no point of a
-    smooth curve), is not interpolated from; nothing is extrapolated (NaN when no setting gets that close).
+    """Wall time per simulated second (or `key` of the row, read at the same place) at `target` error on the
+    method's work–precision curve: its settings in the order of the ladder (loosest first), the cheapest of a setting
+    whose error is at most `target` and a log-log interpolation between two neighbouring settings whose errors
+    bracket it. A setting that failed, or that booked another number of impacts than the reference (a missed or extra
+    contact: no point of a smooth curve), is not interpolated from; nothing is extrapolated (NaN when no setting gets
+    that close).
 
     Neighbours on the ladder, not on the sorted errors: a run that missed a contact can have a smaller error than
     a tighter one, or the same as a looser one, and sorting the points by error then brackets the target with
-    settings whose neighbours in between did not reach it."""
+    settings whose neighbours in between did not reach it. The cheapest place is chosen by cost whatever `key` is:
+    a floor or a ratio is read where the cost is, not at its own least."""
     rows = list(rows)
     values = [_setting(r) for r in rows]
     if all(math.isfinite(v) for v in values):  # else the rows' own order is the ladder's
         rows = [r for _, _, r in sorted(zip((-v for v in values), range(len(rows)), rows))]
 
     def point(r: Row) -> bool:
-        return (not r.failure and math.isfinite(r.error) and r.error >= 0 and math.isfinite(key(r)) and key(r) > 0
-                and (r.impacts is None or r.impacts == r.ref_impacts))
+        return (not r.failure and math.isfinite(r.error) and r.error >= 0 and math.isfinite(r.cost) and r.cost > 0
+                and math.isfinite(key(r)) and key(r) > 0 and (r.impacts is None or r.impacts == r.ref_impacts))
 
-    best = math.inf
+    best = (math.inf, math.nan)  # (cost, key) at the cheapest place found
     for r in rows:
         if point(r) and r.error <= target:
-            best = min(best, key(r))
+            best = min(best, (r.cost, key(r)))
     for a, b in zip(rows, rows[1:]):
         if not (point(a) and point(b) and a.error > 0 and b.error > 0):
             continue
-        (e1, c1), (e2, c2) = sorted(((a.error, key(a)), (b.error, key(b))))
+        (e1, c1, k1), (e2, c2, k2) = sorted(((a.error, a.cost, key(a)), (b.error, b.cost, key(b))))
         if e1 < target < e2:
             w = (math.log(target) - math.log(e1)) / (math.log(e2) - math.log(e1))
-            best = min(best, math.exp(math.log(c1) + w * (math.log(c2) - math.log(c1))))
-    return best if best < math.inf else math.nan
+            best = min(best, tuple(math.exp(math.log(x1) + w * (math.log(x2) - math.log(x1)))
+                                   for x1, x2 in ((c1, c2), (k1, k2))))
+    return best[1] if best[0] < math.inf else math.nan
 
 
 def best_scipy(rows: list[Row], scene: str, target: float) -> tuple[float, str]:
