@@ -180,3 +180,23 @@ def test_scale_reports_the_fitted_exponent():
     text = scale_markdown({"sizes": sizes, "smooth": [], "skin": []}, "scale.png")
     assert ("as `simulate` runs it by default (in islands): **0.05 s** (20.0× real time); with one step size "
             "(`solver.islands = false`) **0.2 s** (5.0×); met.") in text
+
+
+def test_the_mujoco_target_names_each_scene_where_mujoco_reaches_the_error():
+    """The report said 'MuJoCo never reaches 1e-6 rad' while its RK4 did on the free swing (2026-12-01): the target is
+    judged on every scene where one does, against grapefmu's cost there."""
+    from grapefmu.bench.harness import mujoco_target
+
+    def row(scene, method, setting, cost, err):
+        return Row(scene, method, setting, cost, err, 0.0, None, 0, 0.0, 0.0, None)
+    rows = [row("free swing", "grapefmu event", "rtol 1e-6", 0.5e-3, 7e-7),
+            row("free swing", "MuJoCo RK4", "dt 0.001", 7.7e-3, 3e-7),
+            row("free swing", "MuJoCo Euler", "dt 0.001", 1e-3, 1e-2),
+            row("paper collision", "grapefmu event", "rtol 1e-6", 0.25e-3, 9e-7),
+            row("paper collision", "MuJoCo RK4", "dt 0.001", 5e-3, 1e-3)]
+    text = mujoco_target(rows)
+    assert text.startswith("free swing: MuJoCo RK4 7.7 ms against ours 0.5 ms") and text.endswith("met.")
+    assert "paper collision" not in text
+    rows[1] = row("free swing", "MuJoCo RK4", "dt 0.001", 0.4e-3, 3e-7)
+    assert mujoco_target(rows).endswith("missed.")
+    assert "no scene" in mujoco_target(rows[2:])
