@@ -6,9 +6,8 @@ Protocol (issue 5): reference = grapefmu at rtol 1e-13 checked against scipy DOP
 (must agree to 1e-10 rad, or the scene is refused); error = largest angle error on the 1 ms grid, final
 state error, impact count, impact-time and peak-force error; cost = wall time per simulated second, the
 minimum of several rounds that run each method and setting of a scene once in turn, after a warm-up round (numba
-compile measured separately), and right-hand-side
-evaluations with their floor (evaluations × a bare compiled evaluation's cost on the scene's states,
-bench/costs.py). The paper collision scene is also stepped from a face: advance(1 ms) against one run.
+compile measured separately), and right-hand-side evaluations with their floor (evaluations × a bare compiled
+evaluation's cost on the scene's states, bench/costs.py). The paper collision scene is also stepped from a face: advance(1 ms) against one run.
 A failed run is a row that says why."""
 from __future__ import annotations
 

@@ -130,7 +130,7 @@ def interleaved(fns, repeats: int, budget: float) -> list[tuple[Outcome, float]]
     the minimum of its rounds (its warm-up's time if it sat them out: a fn sits out the rounds left once its runs
     took more than `budget` seconds in all, and every round after a failure). Interleaved, as the issue measures:
     back to back, a sub-millisecond compiled run is timed in a state of the caches that only its own repetition
-    leaves (about 1.5× faster on the paper collision than right after a scipy run; docs/bench_notes.md)."""
+    leaves (1.2–1.6× faster on the paper collision than right after a scipy run; docs/bench_notes.md)."""
     first = [_once(fn) for fn in fns]
     spent = [t for _, t in first]
     best = [math.inf] * len(fns)
