@@ -63,14 +63,16 @@ def test_cost_interpolation_and_failures():
     assert math.isnan(cost_at(rows, 1e-10))  # never reached: not extrapolated
 
 
-def test_methods_are_timed_in_rounds_that_run_each_once_and_keep_its_fastest():
+def test_methods_are_timed_in_rounds_that_run_each_once_and_keep_its_fastest(monkeypatch):
     """The harness interleaves: each round runs every method once, in turn; a method keeps its fastest round, sits
-    out the rounds after its runs took more than the budget, and one that fails says so and runs no more."""
-    import time
-
+    out the rounds after its runs took more than the budget, and one that fails says so and runs no more. Each run
+    advances a clock of the test's own by its time, so a loaded host cannot move the budget's verdicts."""
+    from grapefmu.bench import methods
     from grapefmu.bench.methods import Outcome, interleaved
     from grapefmu.errors import GrapefmuError
 
+    now = [0.0]
+    monkeypatch.setattr(methods.time, "perf_counter", lambda: now[0])
     calls = []
 
     def method(name, sleeps=(), fail_at=None):
@@ -79,12 +81,13 @@ def test_methods_are_timed_in_rounds_that_run_each_once_and_keep_its_fastest():
             calls.append(name)
             if k == fail_at:
                 raise GrapefmuError("gave up")
-            time.sleep(sleeps[k] if k < len(sleeps) else 0.0)
+            now[0] += sleeps[k] if k < len(sleeps) else 0.0
             return Outcome(rhs=k)
         return fn
 
-    fast_late = method("a", sleeps=(0.04, 0.03, 0.01, 0.03))
-    slow = method("b", sleeps=(0.1,) * 5)
+    # times in 1/1024 s, so that the clock's differences are exact
+    fast_late = method("a", sleeps=(48 / 1024, 32 / 1024, 16 / 1024, 32 / 1024))
+    slow = method("b", sleeps=(104 / 1024,) * 5)
     failing = method("c", fail_at=1)
     out = interleaved([fast_late, slow, failing], repeats=3, budget=0.25)
     assert calls == ["a", "b", "c", "a", "b", "c", "a", "b", "a"]  # b sits out once its runs took 0.3 s > 0.25
