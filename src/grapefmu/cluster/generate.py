@@ -7,7 +7,8 @@ viscoelastic hinge. Diameters, twig lengths and hinge coefficients are drawn fro
 distributions (mean and spread, as in the three-dimensional cluster model the paper builds on).
 Each hinge's rest angles are set so that the placed pose is the static equilibrium under
 gravity: a cluster at rest stays at rest until the gripper moves. Berries are placed one by one
-and a placement is redrawn while it overlaps a placed berry by more than `precompression`.
+and a placement is redrawn while it overlaps a placed berry by more than `precompression`, or by more than
+MAX_OVERLAP_FRACTION of the smaller radius (the most a scene's start may hold: a deeper pair is refused).
 
 Planar row: N berries on one rod, the dual-twig–berry system generalised (a Newton's cradle of
 pendulums when the pitch equals the diameter).
@@ -22,7 +23,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..model.bounds import bound
-from ..model.model import Berry
+from ..model.model import MAX_OVERLAP_FRACTION, Berry
 
 DENSITY = 1070.0  # kg/m³, grape berry (docs/parameters.md)
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
@@ -129,7 +130,8 @@ def cluster_scene(spec: ClusterSpec, max_tries: int = 400) -> dict[str, Any]:
             tilt = rng.uniform(*spec.tilt)
             u = np.array([math.cos(heading) * math.sin(tilt), math.sin(heading) * math.sin(tilt), -math.cos(tilt)])
             centre = hinge + l_twig * u
-            if all(np.linalg.norm(centre - c) >= r + rc - spec.precompression for c, rc in placed):
+            if all(np.linalg.norm(centre - c) >= r + rc - min(spec.precompression, MAX_OVERLAP_FRACTION * min(r, rc))
+                   for c, rc in placed):
                 break
         else:
             raise SceneError("cluster.berries", f"placed only {i} of {n} berries without overlapping more than "
