@@ -69,6 +69,24 @@ def test_the_largest_precompression_gives_a_scene_that_loads():
         assert depth <= 1e-12
 
 
+def test_drawn_sizes_are_the_ones_asked_for_or_refused_by_their_option():
+    """A diameter was floored at 4 mm and a hinge at 1e-5 N·m/rad without a word (an audit: `grapefmu cluster
+    --diameter 0.001 0` wrote 4 mm berries, 64 times the mass asked for), and a diameter beyond the model's range was
+    refused as 'berries[0].mass'. The range drawn from, mean ± 3 sd, is now checked against the berry's field."""
+    from grapefmu.cluster.generate import Spread
+    doc = cluster_scene(ClusterSpec(berries=20, diameter=Spread(0.001, 0.0)))
+    assert {b["radius"] for b in doc["berries"]} == {0.0005}
+    for key, spread, words in (("diameter", Spread(0.027, 0.01), "(0, 0.2] m"),  # 3 sd reach below zero
+                               ("diameter", Spread(0.3, 0.0), "(0, 0.2] m"),  # a radius above 0.1 m
+                               ("hinge_stiffness", Spread(1e-6, 1e-6), "(0, 1000] N·m/rad"),
+                               ("twig_length", Spread(0.9, 0.1), "≤ 1 m"),
+                               ("hinge_damping", Spread(1e3, 1.0), "≤ 1000")):
+        big = {"twig_length": Spread(0.5, 0.0), "hinge_stiffness": Spread(100.0, 0.0)} if key == "diameter" else {}
+        with pytest.raises(SceneError, match=f"cluster.{key}") as ei:
+            cluster_scene(ClusterSpec(berries=5, **{**big, key: spread}))
+        assert words in ei.value.why
+
+
 def test_energy_ledger_closes_for_a_cluster_under_pick_and_place():
     run = simulate(cluster(30, t_end=1.0))
     assert run.collision_count > 10

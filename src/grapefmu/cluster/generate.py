@@ -64,15 +64,27 @@ class ClusterSpec:
     name: str = "cluster"
 
 
+#: each drawn quantity: the Berry field it becomes, and that field's bound in its units (a diameter is two radii)
+DRAWN = {"diameter": ("radius", 2.0), "twig_length": ("twig_length", 1.0), "hinge_stiffness": ("hinge_stiffness", 1.0),
+         "hinge_damping": ("hinge_damping", 1.0)}
+#: drawn quantities that must be positive: a berry has a size, a hinge holds its twig (a twig is kept above 1.2 r)
+POSITIVE = ("diameter", "hinge_stiffness")
+
+
 def _check(spec: ClusterSpec) -> None:
     if not 1 <= spec.berries <= 1000:
         raise SceneError("cluster.berries", f"expected an integer in [1, 1000], got {spec.berries!r}")
     if not 0 <= spec.seed < 2**63:
         raise SceneError("cluster.seed", f"expected an integer in [0, 2**63), got {spec.seed!r}")
-    for key in ("diameter", "twig_length", "hinge_stiffness", "hinge_damping"):
-        s = getattr(spec, key)
+    for key, (name, per) in DRAWN.items():
+        s, b = getattr(spec, key), bound(Berry, name)
         if not (s.mean > 0 and s.sd >= 0 and math.isfinite(s.mean) and math.isfinite(s.sd)):
             raise SceneError(f"cluster.{key}", f"expected a mean > 0 and a spread ≥ 0, got {s.mean!r} ± {s.sd!r}")
+        # the draws span mean ± 3 sd: each must be a value the berry's field holds, never one changed in silence
+        if s.mean + 3 * s.sd > b.hi * per or (key in POSITIVE and s.mean - 3 * s.sd <= 0):
+            span = f"mean ± 3 sd within (0, {b.hi * per:g}]" if key in POSITIVE else f"mean + 3 sd ≤ {b.hi * per:g}"
+            raise SceneError(f"cluster.{key}", f"expected {span} {b.unit} (the range drawn from), "
+                             f"got {s.mean!r} ± {s.sd!r}")
     if not 0 <= spec.precompression <= 0.2 * spec.diameter.mean / 2:
         raise SceneError("cluster.precompression",
                          f"expected a number in [0, {0.1 * spec.diameter.mean:g}] m (0.2 of the mean radius), "
@@ -119,9 +131,9 @@ def cluster_scene(spec: ClusterSpec, max_tries: int = 400) -> dict[str, Any]:
     berries = []
     g = 9.81
     for i in range(n):
-        r = spec.diameter.draw(rng, lo=0.004) / 2
+        r = spec.diameter.draw(rng) / 2
         l_twig = spec.twig_length.draw(rng, lo=1.2 * r)
-        k_h = spec.hinge_stiffness.draw(rng, lo=1e-5)
+        k_h = spec.hinge_stiffness.draw(rng)
         c_h = spec.hinge_damping.draw(rng, lo=0.0)
         for _ in range(max_tries):
             base, tip = laterals[rng.choice(n_lat, p=weights)]
@@ -142,7 +154,7 @@ def cluster_scene(spec: ClusterSpec, max_tries: int = 400) -> dict[str, Any]:
         # the twig frame's −y axis points along the twig's heading: (swing, tilt) = (0, tilt) is the pose
         azimuth = heading + math.pi / 2
         rest_tilt = tilt + mass * g * l_twig * math.sin(tilt) / k_h
-        if rest_tilt > REST_TILT.hi:  # the hinge's spring must hold the twig's weight at its tilt: ~1e-5 N·m/rad cannot
+        if rest_tilt > REST_TILT.hi:  # the hinge's spring must hold the twig's weight at its tilt
             need = mass * g * l_twig * math.sin(tilt) / (REST_TILT.hi - tilt)
             raise SceneError("cluster.hinge_stiffness", f"berry {i}'s hinge of {k_h:.3g} N·m/rad cannot hold its twig "
                              f"at its tilt of {tilt:.3g} rad (a rest angle of {rest_tilt:.4g} rad); it needs at least "
