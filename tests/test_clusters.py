@@ -87,6 +87,18 @@ def test_drawn_sizes_are_the_ones_asked_for_or_refused_by_their_option():
         assert words in ei.value.why
 
 
+def test_editing_a_generated_document_leaves_the_next_one_alone():
+    """A document's moves were the module's DEFAULT_MOVES themselves (dict() copies one level): slowing one generated
+    plan down slowed every later default cluster in the process, and the default spec with it (an audit)."""
+    fresh = cluster_scene(ClusterSpec(berries=3))
+    for doc in (cluster_scene(ClusterSpec(berries=3)), row_scene(RowSpec(excitation=ClusterSpec().excitation))):
+        doc["excitation"]["moves"][0]["duration"] = 9.0
+        doc["solver"]["t_end"] = 9.0
+        doc["contact"]["stiffness"] = 9.0
+    assert cluster_scene(ClusterSpec(berries=3)) == fresh
+    assert fresh["excitation"]["moves"][0]["duration"] == 0.4 and fresh["solver"]["t_end"] == 2.5
+
+
 def test_energy_ledger_closes_for_a_cluster_under_pick_and_place():
     run = simulate(cluster(30, t_end=1.0))
     assert run.collision_count > 10

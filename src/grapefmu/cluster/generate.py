@@ -15,6 +15,7 @@ pendulums when the pitch equals the diameter).
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -163,8 +164,7 @@ def cluster_scene(spec: ClusterSpec, max_tries: int = 400) -> dict[str, Any]:
                         "hinge": [float(x) for x in hinge], "azimuth": math.remainder(azimuth, 2 * math.pi),
                         "rest_angles": [0.0, rest_tilt], "hinge_stiffness": k_h, "hinge_damping": c_h,
                         "angle": [0.0, tilt], "angular_velocity": [0.0, 0.0]})
-    return {"name": spec.name, "gravity": g, "berries": berries, "contact": dict(spec.contact),
-            "excitation": dict(spec.excitation), "solver": dict(spec.solver)}
+    return {"name": spec.name, "gravity": g, "berries": berries, **_settings(spec)}
 
 
 @dataclass(frozen=True)
@@ -204,6 +204,11 @@ def row_scene(spec: RowSpec) -> dict[str, Any]:
                 "hinge_x": (i - (n - 1) / 2) * spec.pitch, "hinge_stiffness": spec.hinge_stiffness,
                 "hinge_damping": spec.hinge_damping, "angle": float(angles[i]), "angular_velocity": 0.0}
                for i in range(n)]
-    return {"name": spec.name, "gravity": 9.81, "berries": berries, "contact": dict(spec.contact),
-            "excitation": dict(spec.excitation), "solver": dict(spec.solver)}
+    return {"name": spec.name, "gravity": 9.81, "berries": berries, **_settings(spec)}
+
+
+def _settings(spec: ClusterSpec | RowSpec) -> dict[str, Any]:
+    """The spec's contact, excitation and solver tables, copied through: a caller editing a document's moves
+    must not edit the spec's (or every later default cluster's: DEFAULT_MOVES)."""
+    return copy.deepcopy({"contact": spec.contact, "excitation": spec.excitation, "solver": spec.solver})
 
