@@ -52,6 +52,11 @@ def test_bad_cluster_request_names_the_field():
         cluster_scene(ClusterSpec(berries=10, precompression=0.01))
     with pytest.raises(SceneError, match=r"cluster.berries.*\[1, 1000\]"):
         cluster_scene(ClusterSpec(berries=0))
+    for key, bad in (("berries", 2.5), ("berries", True), ("seed", 1.5), ("seed", False)):  # a TypeError, or taken
+        with pytest.raises(SceneError, match=f"cluster.{key}: expected an integer"):
+            cluster_scene(ClusterSpec(**{"berries": 5, key: bad}))
+    with pytest.raises(SceneError, match="row.berries: expected an integer"):
+        row_scene(RowSpec(berries=2.5))
 
 
 def test_the_largest_precompression_gives_a_scene_that_loads():

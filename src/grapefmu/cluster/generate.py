@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 import math
+from numbers import Integral
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -72,10 +73,15 @@ DRAWN = {"diameter": ("radius", 2.0), "twig_length": ("twig_length", 1.0), "hing
 POSITIVE = ("diameter", "hinge_stiffness")
 
 
+def _integer(x: Any) -> bool:
+    """An integer, not a bool: 2.5 berries (range) or seed 1.5 (numpy) failed with a TypeError naming no field."""
+    return isinstance(x, Integral) and not isinstance(x, bool)
+
+
 def _check(spec: ClusterSpec) -> None:
-    if not 1 <= spec.berries <= 1000:
+    if not (_integer(spec.berries) and 1 <= spec.berries <= 1000):
         raise SceneError("cluster.berries", f"expected an integer in [1, 1000], got {spec.berries!r}")
-    if not 0 <= spec.seed < 2**63:
+    if not (_integer(spec.seed) and 0 <= spec.seed < 2**63):
         raise SceneError("cluster.seed", f"expected an integer in [0, 2**63), got {spec.seed!r}")
     for key, (name, per) in DRAWN.items():
         s, b = getattr(spec, key), bound(Berry, name)
@@ -190,7 +196,7 @@ class RowSpec:
 def row_scene(spec: RowSpec) -> dict[str, Any]:
     """A row of identical berries on one rod; neighbours are the contact pairs that can touch."""
     n = spec.berries
-    if not 1 <= n <= 1000:
+    if not (_integer(n) and 1 <= n <= 1000):
         raise SceneError("row.berries", f"expected an integer in [1, 1000], got {n!r}")
     if not (math.isfinite(spec.pitch) and 0 < spec.pitch <= 1.0):
         raise SceneError("row.pitch", f"expected a hinge spacing in (0, 1] m, got {spec.pitch!r}")
