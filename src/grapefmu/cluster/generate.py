@@ -6,8 +6,9 @@ tapers). Each berry hangs on its own twig from a point on a lateral, as a spheri
 viscoelastic hinge. Diameters, twig lengths and hinge coefficients are drawn from normal
 distributions (mean and spread, as in the three-dimensional cluster model the paper builds on).
 Each hinge's rest angles are set so that the placed pose is the static equilibrium under
-gravity: a cluster at rest stays at rest until the gripper moves. Berries are placed one by one
-and a placement is redrawn while it overlaps a placed berry by more than `precompression`, or by more than
+gravity: a cluster at rest stays at rest until the gripper moves, unless it was placed with precompression (the
+contact forces of pressed pairs are not part of the equilibrium: they push apart at the start). Berries are placed
+one by one and a placement is redrawn while it overlaps a placed berry by more than `precompression`, or by more than
 MAX_OVERLAP_FRACTION of the smaller radius (the most a scene's start may hold: a deeper pair is refused).
 
 Planar row: N berries on one rod, the dual-twig–berry system generalised (a Newton's cradle of
