@@ -57,6 +57,12 @@ def test_bad_cluster_request_names_the_field():
             cluster_scene(ClusterSpec(**{"berries": 5, key: bad}))
     with pytest.raises(SceneError, match="row.berries: expected an integer"):
         row_scene(RowSpec(berries=2.5))
+    # pressed into each other at rest, or hinges beyond ±10 m: the loader named berries[59].angle or berries[0].hinge_x
+    for n, pitch, key, words in ((60, 0.02, "pitch", "[0.0243, 0.339] m"), (100, 1.0, "pitch", "[0.0243, 0.202] m"),
+                                 (1000, 0.027, "berries", "at most 824 berries")):
+        with pytest.raises(SceneError, match=f"row.{key}") as ei:
+            row_scene(RowSpec(berries=n, pitch=pitch))
+        assert words in ei.value.why
 
 
 def test_the_largest_precompression_gives_a_scene_that_loads():

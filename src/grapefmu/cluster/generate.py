@@ -199,8 +199,16 @@ def row_scene(spec: RowSpec) -> dict[str, Any]:
     n = spec.berries
     if not (_integer(n) and 1 <= n <= 1000):
         raise SceneError("row.berries", f"expected an integer in [1, 1000], got {n!r}")
-    if not (math.isfinite(spec.pitch) and 0 < spec.pitch <= 1.0):
-        raise SceneError("row.pitch", f"expected a hinge spacing in (0, 1] m, got {spec.pitch!r}")
+    # hanging, neighbours may overlap by MAX_OVERLAP_FRACTION of a radius (the loader's limit) and the row must keep
+    # its hinges within hinge_x's ±10 m: beyond either the loader refused a field the caller never set
+    span, lo = bound(Berry, "hinge_x").hi * 2, (2 - MAX_OVERLAP_FRACTION) * spec.radius
+    if (n - 1) * lo > span:
+        raise SceneError("row.berries", f"expected at most {int(span / lo) + 1} berries of radius {spec.radius:g} m "
+                         f"(their hinges within ±{span / 2:g} m), got {n}")
+    hi = min(1.0, span / max(n - 1, 1))
+    if not (math.isfinite(spec.pitch) and lo <= spec.pitch <= hi):
+        raise SceneError("row.pitch", f"expected a hinge spacing in [{lo:.4g}, {hi:.4g}] m for {n} berries of radius "
+                         f"{spec.radius:g} m, got {spec.pitch!r}")
     angles = list(spec.angles) or [-math.radians(30.0)] + [0.0] * (n - 1)
     if len(angles) != n:
         raise SceneError("row.angles", f"expected {n} angles (one per berry), got {len(angles)}")
