@@ -485,3 +485,30 @@ def test_an_empty_file_and_a_damaged_end_magic_are_said_as_they_are(recordings, 
     damaged.write_bytes(bytes(data))
     with pytest.raises(CorruptRecording, match=r"corrupted \(its end magic is damaged\)"):
         check(damaged)
+
+
+@pytest.mark.parametrize("bad_first", [True, False])
+def test_a_second_joint_state_at_a_stamp_is_compared_too(recordings, tmp_path, capsys, bad_first):
+    """Recorded states were keyed by their stamp, so of two at one stamp the first was dropped unread: a state 0.5 rad
+    off written before the true one passed (51 compared, deviation 0; found by rewriting a recording with a copy)."""
+    path = tmp_path / "twice.mcap"
+    with open(recordings["chunked"], "rb") as fh:
+        reader = make_reader(fh)
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages()]
+    with McapWriter(path, chunk_size=2048) as w:
+        for name, data in meta.items():
+            w.add_metadata(name, data)
+        for typename, topic, t, data in msgs:
+            m = deserialize(data, typename)
+            if topic == absolute("joint_states") and t == 20_000_000:
+                bad = deserialize(data, typename)
+                bad.position = bad.position + 0.5
+                for x in ((bad, m) if bad_first else (m, bad)):
+                    w.write(topic, x, t)
+            else:
+                w.write(topic, m, t)
+    r = check(path)
+    assert not r.ok and r.unmatched == 1 and r.max_deviation == pytest.approx(0.5 if bad_first else 0.0)
+    rc, out = replay(path, capsys)
+    assert rc == 1 and "t = 0.020000 s" in out

@@ -357,8 +357,9 @@ def cmd_replay(a: argparse.Namespace) -> int:
     print(f"  largest deviation: angle {r.max_angle_deviation:.3g} rad, angular velocity {r.max_rate_deviation:.3g} rad/s")
     if r.unmatched:
         print(f"grapefmu: check failed: {a.recording}: {r.unmatched} recorded joint states (the first at t = "
-              f"{r.first_unmatched:.6f} s) have no sample in the re-simulation: the recorded settings (t_end, "
-              "output_interval) do not describe the run that wrote them", file=sys.stderr)
+              f"{r.first_unmatched:.6f} s) have no sample in the re-simulation: a second state at one stamp, or "
+              "recorded settings (t_end, output_interval) that do not describe the run that wrote them",
+              file=sys.stderr)
         return 1
     if not r.ok:
         print(f"grapefmu: check failed: {a.recording}: the recorded joint states deviate by up to "

@@ -240,8 +240,8 @@ class CheckResult:
     truncated: str | None
     worst_time: float = math.nan   # s, the recorded time of the largest deviation
     tolerance: float = TOLERANCE
-    #: recorded joint states the re-simulation has no sample at (settings that do not describe the recorded run), and
-    #: the time of the first
+    #: recorded joint states the re-simulation has no sample at (settings that do not describe the recorded run, a
+    #: second state at one stamp), and the time of the first
     unmatched: int = 0
     first_unmatched: float = math.nan
 
@@ -376,13 +376,15 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         run = simulate(scene, solver_cfg.get("t_end"), method=method, rtol=solver_cfg.get("rtol"),
                        atol=solver_cfg.get("atol"), output_interval=solver_cfg.get("output_interval"),
                        cross_check=False)
-        recorded = {ns: (q, w) for ns, q, w in states}
+        recorded: dict[int, list] = {}  # every state at a stamp, in the file's order: a second one is no sample's
+        for ns, q, w in states:
+            recorded.setdefault(ns, []).append((q, w))
         for k, t in enumerate(run.t):
-            key = to_ns(t)
-            if key in recorded:
-                compare(key, *recorded.pop(key), run.angles[k], run.angular_velocities[k])
-        unmatched = len(recorded)  # a shorter t_end or a coarser grid than the run that wrote them
-        first_unmatched = seconds(min(recorded)) if recorded else math.nan
+            if at_key := recorded.get(to_ns(t)):
+                compare(to_ns(t), *at_key.pop(0), run.angles[k], run.angular_velocities[k])
+        left = [ns for ns, v in recorded.items() for _ in v]  # a shorter t_end or a coarser grid than the run's
+        unmatched = len(left)
+        first_unmatched = seconds(min(left)) if left else math.nan
     else:
         from ..solver.solver import Solver
         # the node's solver is driven by its inputs (metadata "turning"). Recordings before it could say so had
