@@ -512,3 +512,18 @@ def test_a_second_joint_state_at_a_stamp_is_compared_too(recordings, tmp_path, c
     assert not r.ok and r.unmatched == 1 and r.max_deviation == pytest.approx(0.5 if bad_first else 0.0)
     rc, out = replay(path, capsys)
     assert rc == 1 and "t = 0.020000 s" in out
+
+
+def test_joint_states_naming_other_joints_are_refused(recordings, tmp_path, capsys):
+    """The joint names were not read: a recording whose joint_states named its two angles the other way round (a
+    viewer shows each at the other twig) passed with deviation 0 (found by rewriting a recording with rosbags' reader
+    and the typestore)."""
+    def swap(topic, t, m):
+        if topic == absolute("joint_states"):
+            m.name = list(reversed(m.name))
+    path = tmp_path / "swapped.mcap"
+    rewrite(recordings["chunked"], path, swap)
+    with pytest.raises(RecordingError, match="names the joints .* the recorded scene's are"):
+        check(path)
+    rc, out = replay(path, capsys)
+    assert rc == 2 and len(out.strip().splitlines()) == 1 and "joint_states logged at 0.000000 s" in out

@@ -343,12 +343,16 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
     rec = read_recording(path, {"joint_states", "rachis/accel_applied", "rachis/twist_applied", "sim_time"})
     scene, solver_cfg, method = _settings(path, rec)
     n_dof = scene.model.n_dof
+    joints = [f"twig_{n}" for n in scene.model.dof_names]  # as messages.state_messages names them
     states = []  # (logged at = the header's stamp in ns, angles, rates), in the file's order
     for ns, m in rec.topics.get("joint_states", []):
         q, w = np.array(m.position, dtype=float), np.array(m.velocity, dtype=float)
         if q.shape != (n_dof,) or w.shape != (n_dof,):
             raise RecordingError(f"{path}: joint_states logged at {_t(ns)} has {q.size} positions and {w.size} "
                                  f"velocities, the recorded scene has {n_dof} angles")
+        if list(m.name) != joints:  # a viewer places each value at the joint its name says
+            raise RecordingError(f"{path}: joint_states logged at {_t(ns)} names the joints {list(m.name)}, the "
+                                 f"recorded scene's are {joints}")
         states.append((ns, q, w))
     if not states:
         raise RecordingError(f"{path}: no joint_states to compare")
