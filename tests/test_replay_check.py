@@ -527,3 +527,24 @@ def test_joint_states_naming_other_joints_are_refused(recordings, tmp_path, caps
         check(path)
     rc, out = replay(path, capsys)
     assert rc == 2 and len(out.strip().splitlines()) == 1 and "joint_states logged at 0.000000 s" in out
+
+
+@pytest.mark.parametrize("drop, missing", [(lambda t: t % 2_000_000, 25), (lambda t: t > 0, 50)])
+def test_a_whole_recording_without_some_joint_states_fails(recordings, tmp_path, capsys, drop, missing):
+    """A whole (not truncated) recording is one joint state per re-simulated sample. One left with every other state,
+    or with the first alone, passed (26 or 1 compared, deviation 0; found by rewriting a recording without them)."""
+    path = tmp_path / "sparse.mcap"
+    with open(recordings["chunked"], "rb") as fh:
+        reader = make_reader(fh)
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages()]
+    with McapWriter(path, chunk_size=2048) as w:
+        for name, data in meta.items():
+            w.add_metadata(name, data)
+        for typename, topic, t, data in msgs:
+            if not (topic == absolute("joint_states") and drop(t)):
+                w.write(topic, deserialize(data, typename), t)
+    r = check(path)
+    assert not r.ok and r.missing == missing and r.first_missing == 0.001 and r.max_deviation == 0.0
+    rc, out = replay(path, capsys)
+    assert rc == 1 and f"{missing} re-simulated samples (the first at t = 0.001000 s) have no recorded" in out

@@ -361,6 +361,11 @@ def cmd_replay(a: argparse.Namespace) -> int:
               "recorded settings (t_end, output_interval) that do not describe the run that wrote them",
               file=sys.stderr)
         return 1
+    if r.missing:
+        print(f"grapefmu: check failed: {a.recording}: {r.missing} re-simulated samples (the first at t = "
+              f"{r.first_missing:.6f} s) have no recorded joint state: states left out of the recording, or recorded "
+              "settings (t_end, output_interval) that do not describe the run that wrote it", file=sys.stderr)
+        return 1
     if not r.ok:
         print(f"grapefmu: check failed: {a.recording}: the recorded joint states deviate by up to "
               f"{r.max_deviation:.3g} (at t = {r.worst_time:.6f} s), more than the tolerance {r.tolerance:g} rad, rad/s",

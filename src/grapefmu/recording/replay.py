@@ -244,6 +244,10 @@ class CheckResult:
     #: second state at one stamp), and the time of the first
     unmatched: int = 0
     first_unmatched: float = math.nan
+    #: re-simulated samples the recording has no joint state at (up to its last one if it is truncated), and the time
+    #: of the first
+    missing: int = 0
+    first_missing: float = math.nan
 
     @property
     def max_deviation(self) -> float:
@@ -251,8 +255,9 @@ class CheckResult:
 
     @property
     def ok(self) -> bool:
-        """Every recorded joint state compared, and within the tolerance (NaN counts as a deviation)."""
-        return self.max_deviation <= self.tolerance and not self.unmatched
+        """Every recorded joint state compared, one for every re-simulated sample, and within the tolerance (NaN
+        counts as a deviation)."""
+        return self.max_deviation <= self.tolerance and not self.unmatched and not self.missing
 
 
 def _deviation(a: np.ndarray, b: np.ndarray) -> float:
@@ -360,8 +365,8 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
     scene = _pinned(scene, solver_cfg, method)
     dq = dw = 0.0
     worst, worst_t = -1.0, math.nan
-    n = unmatched = 0
-    first_unmatched = math.nan
+    n = unmatched = missing = 0
+    first_unmatched = first_missing = math.nan
 
     def compare(t: int, q, w, angles, rates) -> None:
         nonlocal dq, dw, worst, worst_t, n
@@ -383,9 +388,15 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         recorded: dict[int, list] = {}  # every state at a stamp, in the file's order: a second one is no sample's
         for ns, q, w in states:
             recorded.setdefault(ns, []).append((q, w))
+        last = max(recorded) if rec.truncated else math.inf  # a truncated file lacks the samples after its last
+        lacking = []
         for k, t in enumerate(run.t):
             if at_key := recorded.get(to_ns(t)):
                 compare(to_ns(t), *at_key.pop(0), run.angles[k], run.angular_velocities[k])
+            elif to_ns(t) <= last:
+                lacking.append(t)
+        missing = len(lacking)  # states left out of a whole file, or a longer t_end or a finer grid than the run's
+        first_missing = float(lacking[0]) if lacking else math.nan
         left = [ns for ns, v in recorded.items() for _ in v]  # a shorter t_end or a coarser grid than the run's
         unmatched = len(left)
         first_unmatched = seconds(min(left)) if left else math.nan
@@ -433,4 +444,5 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
                         solver.angles, solver.angular_velocities)
     if n == 0:
         raise RecordingError(f"{path}: no recorded joint state matches a re-simulated time")
-    return CheckResult(n, dq, dw, source, rec.truncated, worst_t, tolerance, unmatched, first_unmatched)
+    return CheckResult(n, dq, dw, source, rec.truncated, worst_t, tolerance, unmatched, first_unmatched, missing,
+                       first_missing)
