@@ -548,3 +548,14 @@ def test_a_whole_recording_without_some_joint_states_fails(recordings, tmp_path,
     assert not r.ok and r.missing == missing and r.first_missing == 0.001 and r.max_deviation == 0.0
     rc, out = replay(path, capsys)
     assert rc == 1 and f"{missing} re-simulated samples (the first at t = 0.001000 s) have no recorded" in out
+
+
+def test_an_input_source_replay_does_not_know_is_refused_naming_it(recordings, tmp_path, capsys):
+    """Any input_source but "scene" was taken for a node recording: a simulate recording whose metadata said
+    "scenee" failed with "no recorded joint state matches a re-simulated time", naming neither field nor value."""
+    path = tmp_path / "source.mcap"
+    rewrite(recordings["chunked"], path, lambda *_: None,
+            meta_change=lambda meta: meta.update(input_source="scenee") if "input_source" in meta else None)
+    rc, out = replay(path, capsys)
+    assert rc == 2 and out.strip().endswith(f"{path}: the recorded input_source 'scenee' is neither 'scene' "
+                                            f"(grapefmu simulate) nor 'applied' (the ROS node)")

@@ -362,6 +362,9 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
     if not states:
         raise RecordingError(f"{path}: no joint_states to compare")
     source = rec.metadata.get("input_source", "scene")
+    if source not in ("scene", "applied"):  # simulate's and the node's (recorder.metadata)
+        raise RecordingError(f"{path}: the recorded input_source {source!r} is neither 'scene' (grapefmu simulate) "
+                             f"nor 'applied' (the ROS node)")
     scene = _pinned(scene, solver_cfg, method)
     dq = dw = 0.0
     worst, worst_t = -1.0, math.nan
