@@ -559,3 +559,20 @@ def test_an_input_source_replay_does_not_know_is_refused_naming_it(recordings, t
     rc, out = replay(path, capsys)
     assert rc == 2 and out.strip().endswith(f"{path}: the recorded input_source 'scenee' is neither 'scene' "
                                             f"(grapefmu simulate) nor 'applied' (the ROS node)")
+
+
+def test_a_corrupted_recording_is_not_republished(recordings, tmp_path, capsys, monkeypatch):
+    """`replay --publish` streamed the file without CRCs: a recording with a bit flipped in a chunk went out without
+    that chunk's messages (300 of 316), exit 0 and no warning. It is now read as --check reads it first."""
+    import grapefmu.cli as cli
+    published = []
+    monkeypatch.setattr(cli, "face", lambda *_: lambda path, rate: published.append(path) or 0)
+    data = bytearray(recordings["chunked"].read_bytes())
+    with open(recordings["chunked"], "rb") as fh:
+        chunk = make_reader(fh).get_summary().chunk_indexes[3]
+    data[chunk.chunk_start_offset + chunk.chunk_length - 10] ^= 0x10
+    path = tmp_path / "flipped.mcap"
+    path.write_bytes(bytes(data))
+    assert main(["replay", str(path), "--publish"]) == 2 and not published
+    assert f"chunk at byte {chunk.chunk_start_offset}" in capsys.readouterr().err
+    assert main(["replay", str(recordings["chunked"]), "--publish"]) == 0 and published == [str(recordings["chunked"])]
