@@ -133,6 +133,11 @@ def summary_table(snap: catalogue.Snapshot) -> np.ndarray:
     return np.column_stack([snap.t, *(np.asarray(c.value(snap), dtype=float) for c in catalogue.on_topic("summary"))])
 
 
+def joint_names(model: Model) -> list[str]:
+    """The joint_states topic's joint names, one per angle (a viewer places each value at the joint its name says)."""
+    return [f"twig_{n}" for n in model.dof_names]
+
+
 def state_messages(model: Model, snap: catalogue.Snapshot, k: int, ns: int, summary: np.ndarray, *,
                    markers: bool = False, tf: bool = True, prefix: str = frames.PREFIX,
                    world: str = frames.WORLD) -> list:
@@ -140,9 +145,8 @@ def state_messages(model: Model, snap: catalogue.Snapshot, k: int, ns: int, summ
     Markers and /tf only when asked: a 3D view needs far fewer of them than the state topics' rate. `world`: the
     fixed frame they are placed in."""
     obs = snap.observation
-    dof_joints = [f"twig_{n}" for n in model.dof_names]
-    out = [("joint_states", msg("sensor_msgs/msg/JointState", header=header(ns, frames.rachis(prefix)), name=dof_joints,
-                                position=snap.angles[k], velocity=snap.angular_velocities[k],
+    out = [("joint_states", msg("sensor_msgs/msg/JointState", header=header(ns, frames.rachis(prefix)),
+                                name=joint_names(model), position=snap.angles[k], velocity=snap.angular_velocities[k],
                                 effort=obs.hinge_torque[k])),
            ("pedicel_tension", msg("grapefmu_msgs/msg/PedicelTension", header=header(ns, frames.rachis(prefix)),
                                    berry=list(model.names), tension=obs.pedicel_tension[k]))]

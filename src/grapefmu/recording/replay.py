@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import GrapefmuError, RecordingError
 from ..model.model import INTEGRATORS, ISLANDS_FROM
 from ..scenefile import parse_scene
-from .messages import NAMESPACE, relative
+from .messages import NAMESPACE, joint_names, relative
 from .stamps import seconds, stamp_seconds, to_ns
 
 
@@ -348,7 +348,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
     rec = read_recording(path, {"joint_states", "rachis/accel_applied", "rachis/twist_applied", "sim_time"})
     scene, solver_cfg, method = _settings(path, rec)
     n_dof = scene.model.n_dof
-    joints = [f"twig_{n}" for n in scene.model.dof_names]  # as messages.state_messages names them
+    joints = joint_names(scene.model)
     states = []  # (logged at = the header's stamp in ns, angles, rates), in the file's order
     for ns, m in rec.topics.get("joint_states", []):
         q, w = np.array(m.position, dtype=float), np.array(m.velocity, dtype=float)
