@@ -21,7 +21,7 @@ from grapefmu.errors import GrapefmuError, RecordingError
 from grapefmu.recording.messages import absolute
 from grapefmu.recording.mcap_writer import write_mcap
 from grapefmu.recording.replay import TOLERANCE, CorruptRecording, check
-from grapefmu.recording.typestore import McapWriter, deserialize
+from grapefmu.recording.typestore import McapWriter, deserialize, serialize
 from grapefmu.scenefile import default_scene_path, load_scene
 from grapefmu.solver.api import simulate
 
@@ -576,3 +576,48 @@ def test_a_corrupted_recording_is_not_republished(recordings, tmp_path, capsys, 
     assert main(["replay", str(path), "--publish"]) == 2 and not published
     assert f"chunk at byte {chunk.chunk_start_offset}" in capsys.readouterr().err
     assert main(["replay", str(recordings["chunked"]), "--publish"]) == 0 and published == [str(recordings["chunked"])]
+
+
+def _node_copy(path: Path, edit) -> None:
+    """recordings/open_loop.mcap (the lockstep node's: two states at t = 0, the start's and the answer to the first
+    input, then accel_applied, sim_time and joint_states per 1 ms interval), rewritten message by message in the
+    file's order: edit(topic, log time, typename, CDR bytes) gives the messages written in its place."""
+    with open(Path(__file__).parents[1] / "recordings" / "open_loop.mcap", "rb") as fh:
+        reader = make_reader(fh)
+        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
+        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages(log_time_order=False)]
+    with McapWriter(path, chunk_size=1 << 16) as w:
+        for name, data in meta.items():
+            w.add_metadata(name, data)
+        for typename, topic, t, data in msgs:
+            for out in edit(topic, t, typename, data):
+                w.write_raw(topic, typename, out, t)
+
+
+def test_an_unchanged_copy_of_a_node_recording_passes(tmp_path):
+    path = tmp_path / "copy.mcap"
+    _node_copy(path, lambda topic, t, typename, data: [data])
+    r = check(path)
+    assert r.ok and r.compared == 2000 and r.max_deviation == 0.0 and r.unmatched == r.missing == 0
+
+
+@pytest.mark.parametrize("stamp", [0, 1_000_000_000])
+def test_a_second_state_at_a_node_recordings_stamp_is_compared_too(tmp_path, capsys, stamp):
+    """The node publishes a state again at its stamp (its start's, the answer to a lockstep input at the current
+    time), so replay compared the first state after each interval's accel_applied and skipped the others: a copy
+    0.5 rad off written after the true one passed (2000 compared, deviation 0; found by an audit rewriting
+    recordings/open_loop.mcap). Every state is compared with the re-simulation's at its place in the file, those at
+    the start with the initial state."""
+    def twice(topic, t, typename, data):
+        if topic != absolute("joint_states") or t != stamp:
+            return [data]
+        bad = deserialize(data, typename)
+        bad.position = bad.position + 0.5
+        return [data, serialize(bad)]
+    path = tmp_path / "twice.mcap"
+    _node_copy(path, twice)
+    r = check(path)
+    assert not r.ok and r.compared == 2000 and r.max_angle_deviation == pytest.approx(0.5)
+    assert r.worst_time == stamp / 1e9
+    rc, out = replay(path, capsys)
+    assert rc == 1 and f"at t = {stamp / 1e9:.6f} s" in out

@@ -327,8 +327,8 @@ def _by_interval(rec: Recording, topic: str, applied: list, at: list[int]) -> tu
     """What the node wrote about interval k (its `rachis/accel_applied` is applied[k], at position at[k] in the
     file) on `topic`: the first such message after that accel_applied, before the next one, at the same stamp
     (stamps alone repeat after a lockstep reset, and go back when a real-time node resumes ahead of its clock). For
-    twist_applied, the angular velocity set at the interval's start; for joint_states, the state it reached; for
-    sim_time, where it ended. Also the stamp of a message that follows no interval (or None)."""
+    twist_applied, the angular velocity set at the interval's start; for sim_time, where it ended. Also the stamp
+    of a message that follows no interval (or None)."""
     out, stray = {}, None
     for pos, (ns, m) in zip(rec.positions.get(topic, []), rec.topics.get(topic, [])):
         k = bisect.bisect_left(at, pos) - 1
@@ -372,12 +372,11 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
     first_unmatched = first_missing = math.nan
 
     def compare(t: int, q, w, angles, rates) -> None:
-        nonlocal dq, dw, worst, worst_t, n
+        nonlocal dq, dw, worst, worst_t
         a, b = _deviation(angles, q), _deviation(rates, w)
         dq, dw = max(dq, a), max(dw, b)
         if max(a, b) > worst:
             worst, worst_t = max(a, b), seconds(t)
-        n += 1
 
     if source == "scene":
         from ..solver.api import simulate
@@ -396,6 +395,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         for k, t in enumerate(run.t):
             if at_key := recorded.get(to_ns(t)):
                 compare(to_ns(t), *at_key.pop(0), run.angles[k], run.angular_velocities[k])
+                n += 1
             elif to_ns(t) <= last:
                 lacking.append(t)
         missing = len(lacking)  # states left out of a whole file, or a longer t_end or a finer grid than the run's
@@ -410,6 +410,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         # moves it; one that holds it still needs a driven solver to take the recorded accelerations
         driven = rec.metadata.get("turning") == "true" or not scene.excitation.moves
         solver = Solver(scene, driven=driven)
+        initial = solver.angles.copy(), solver.angular_velocities.copy()
         applied, at = rec.topics.get("rachis/accel_applied", []), rec.positions.get("rachis/accel_applied", [])
         # each applied interval ends at a simulated time: `sim_time`, logged at the same stamp (its header is
         # the ROS clock), or the stamp itself in recordings made before the node stamped with its clock
@@ -417,6 +418,7 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         # may be an interval's (a reset before the clock moved), so it is left out of the intervals' ends
         start = [m.clock.sec == 0 and m.clock.nanosec == 0 for _, m in rec.topics.get("sim_time", [])]
         starts = [pos for pos, s in zip(rec.positions.get("sim_time", []), start) if s]
+        start_at = [i for i, s in enumerate(start) if s]  # their indices among the sim_time messages
         # by position, as the interval's other messages: a stamp may end two intervals at two simulated times
         ends = {k: to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec))
                 for k, m in _by_interval(rec, "sim_time", applied, at)[0].items() if m.clock.sec or m.clock.nanosec}
@@ -424,7 +426,26 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         if stray is not None:
             raise RecordingError(f"{path}: rachis/twist_applied logged at {_t(stray)} does not follow the "
                                  f"rachis/accel_applied of its interval")
-        reached = _by_interval(rec, "joint_states", applied, at)[0]
+        # every state the node published is its solver's at that place in the file: the one an interval reached, at
+        # its stamp after its accel_applied, again for a lockstep input at the current time; after a (re)start (or
+        # before the first interval) the initial state at the start's stamp. Keyed by interval, or start (-1: the
+        # first, in recordings without its sim_time 0)
+        segments: dict[tuple[str, int], list] = {}
+        for pos, state in zip(rec.positions["joint_states"], states):
+            k, j = bisect.bisect_left(at, pos) - 1, bisect.bisect_left(starts, pos) - 1
+            segments.setdefault(("interval", k) if k >= 0 and (j < 0 or at[k] > starts[j]) else ("start", j),
+                                []).append(state)
+
+        def compare_segment(key, stamp: int | None, angles, rates) -> int:
+            """Compare the states recorded at `key` and `stamp` (None: the first one's) with (angles, rates); how many
+            were."""
+            found = 0
+            for ns, q, w in segments.pop(key, []):
+                stamp = ns if stamp is None else stamp
+                if ns == stamp:
+                    compare(ns, q, w, angles, rates)
+                    found += 1
+            return found
         clocked = "sim_time" in rec.topics  # recordings before the node logged sim_time end an interval at its stamp
         if clocked and rec.truncated and applied and len(applied) - 1 not in ends:
             # cut between the last interval's accel_applied and its sim_time: where it ends is lost (in real time
@@ -442,9 +463,9 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
             set_omega = omega.get(k)
             solver.advance(t_end - solver.t, (a.x, a.y, a.z, w.x, w.y, w.z),
                            None if set_omega is None else (set_omega.x, set_omega.y, set_omega.z))
-            if k in reached:
-                compare(ns, *(np.array(v, dtype=float) for v in (reached[k].position, reached[k].velocity)),
-                        solver.angles, solver.angular_velocities)
+            n += compare_segment(("interval", k), ns, solver.angles, solver.angular_velocities) > 0
+        for key in [key for key in segments if key[0] == "start"]:  # compared, not counted: no re-simulated sample
+            compare_segment(key, rec.topics["sim_time"][start_at[key[1]]][0] if key[1] >= 0 else None, *initial)
     if n == 0:
         raise RecordingError(f"{path}: no recorded joint state matches a re-simulated time")
     return CheckResult(n, dq, dw, source, rec.truncated, worst_t, tolerance, unmatched, first_unmatched, missing,
