@@ -358,10 +358,11 @@ def cmd_replay(a: argparse.Namespace) -> int:
           f"{r.compared} joint states compared")
     print(f"  largest deviation: angle {r.max_angle_deviation:.3g} rad, angular velocity {r.max_rate_deviation:.3g} rad/s")
     if r.unmatched:
+        why = ("a second state at one stamp, or recorded settings (t_end, output_interval) that do not describe the "
+               "run that wrote them" if r.source == "scene" else "a state at another stamp than the interval it "
+               "follows (the rachis/accel_applied of its own lost from the recording?)")
         print(f"grapefmu: check failed: {a.recording}: {r.unmatched} recorded joint states (the first at t = "
-              f"{r.first_unmatched:.6f} s) have no sample in the re-simulation: a second state at one stamp, or "
-              "recorded settings (t_end, output_interval) that do not describe the run that wrote them",
-              file=sys.stderr)
+              f"{r.first_unmatched:.6f} s) have no sample in the re-simulation: {why}", file=sys.stderr)
         return 1
     if r.missing:
         print(f"grapefmu: check failed: {a.recording}: {r.missing} re-simulated samples (the first at t = "

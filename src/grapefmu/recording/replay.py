@@ -438,13 +438,17 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
 
         def compare_segment(key, stamp: int | None, angles, rates) -> int:
             """Compare the states recorded at `key` and `stamp` (None: the first one's) with (angles, rates); how many
-            were."""
+            were. One at another stamp is no sample's (the accel_applied of its own interval lost, say)."""
+            nonlocal unmatched, first_unmatched
             found = 0
             for ns, q, w in segments.pop(key, []):
                 stamp = ns if stamp is None else stamp
                 if ns == stamp:
                     compare(ns, q, w, angles, rates)
                     found += 1
+                else:
+                    first_unmatched = seconds(ns) if not unmatched else first_unmatched
+                    unmatched += 1
             return found
         clocked = "sim_time" in rec.topics  # recordings before the node logged sim_time end an interval at its stamp
         if clocked and rec.truncated and applied and len(applied) - 1 not in ends:
@@ -464,8 +468,8 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
             solver.advance(t_end - solver.t, (a.x, a.y, a.z, w.x, w.y, w.z),
                            None if set_omega is None else (set_omega.x, set_omega.y, set_omega.z))
             n += compare_segment(("interval", k), ns, solver.angles, solver.angular_velocities) > 0
-        for key in [key for key in segments if key[0] == "start"]:  # compared, not counted: no re-simulated sample
-            compare_segment(key, rec.topics["sim_time"][start_at[key[1]]][0] if key[1] >= 0 else None, *initial)
+        for kind, j in [key for key in segments if key[0] == "start"]:  # compared, not counted: no re-simulated sample
+            compare_segment((kind, j), rec.topics["sim_time"][start_at[j]][0] if j >= 0 else None, *initial)
     if n == 0:
         raise RecordingError(f"{path}: no recorded joint state matches a re-simulated time")
     return CheckResult(n, dq, dw, source, rec.truncated, worst_t, tolerance, unmatched, first_unmatched, missing,
