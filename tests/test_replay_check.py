@@ -635,3 +635,16 @@ def test_a_node_recordings_state_at_another_stamp_than_its_interval_fails(tmp_pa
     assert not r.ok and r.unmatched == 1 and r.first_unmatched == 1.0 and r.compared == 1999
     rc, out = replay(path, capsys)
     assert rc == 1 and "1 recorded joint states (the first at t = 1.000000 s)" in out
+
+
+@pytest.mark.parametrize("kept, missing", [(lambda t: t % 10_000_000 == 0, 1800), (lambda t: t != 1_000_000_000, 1)])
+def test_a_whole_node_recording_without_some_joint_states_fails(tmp_path, capsys, kept, missing):
+    """The node publishes a state after every interval; an interval without one was passed over: a copy of
+    recordings/open_loop.mcap with one state in ten passed (ok, 200 compared; found by an audit). In a whole file
+    an interval without its state is missing (a cut file lacks those after its last state alone)."""
+    path = tmp_path / "sparse.mcap"
+    _node_copy(path, lambda topic, t, typename, data: [data] if topic != absolute("joint_states") or kept(t) else [])
+    r = check(path)
+    assert not r.ok and r.missing == missing and r.compared == 2000 - missing and r.max_deviation == 0.0
+    rc, out = replay(path, capsys)
+    assert rc == 1 and f"{missing} re-simulated samples (the first at t = " in out

@@ -365,9 +365,10 @@ def cmd_replay(a: argparse.Namespace) -> int:
               f"{r.first_unmatched:.6f} s) have no sample in the re-simulation: {why}", file=sys.stderr)
         return 1
     if r.missing:
+        why = ", or recorded settings (t_end, output_interval) that do not describe the run that wrote it"
         print(f"grapefmu: check failed: {a.recording}: {r.missing} re-simulated samples (the first at t = "
-              f"{r.first_missing:.6f} s) have no recorded joint state: states left out of the recording, or recorded "
-              "settings (t_end, output_interval) that do not describe the run that wrote it", file=sys.stderr)
+              f"{r.first_missing:.6f} s) have no recorded joint state: states left out of the recording"
+              f"{why if r.source == 'scene' else ''}", file=sys.stderr)
         return 1
     if not r.ok:
         print(f"grapefmu: check failed: {a.recording}: the recorded joint states deviate by up to "

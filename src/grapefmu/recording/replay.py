@@ -233,6 +233,8 @@ TOLERANCE = 1e-6
 
 @dataclass
 class CheckResult:
+    #: re-simulated samples (simulate's output times, the node's intervals) whose recorded joint state was compared;
+    #: a node's other states (its starts', repeats at a stamp) are compared too, not counted
     compared: int
     max_angle_deviation: float
     max_rate_deviation: float
@@ -241,11 +243,12 @@ class CheckResult:
     worst_time: float = math.nan   # s, the recorded time of the largest deviation
     tolerance: float = TOLERANCE
     #: recorded joint states the re-simulation has no sample at (settings that do not describe the recorded run, a
-    #: second state at one stamp), and the time of the first
+    #: second state at one stamp; in a node's, a state at another stamp than the interval it follows), and the time of
+    #: the first
     unmatched: int = 0
     first_unmatched: float = math.nan
-    #: re-simulated samples the recording has no joint state at (up to its last one if it is truncated), and the time
-    #: of the first
+    #: re-simulated samples (a node's intervals) the recording has no joint state at (up to its last one if it is
+    #: truncated), and the time of the first
     missing: int = 0
     first_missing: float = math.nan
 
@@ -467,7 +470,11 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
             set_omega = omega.get(k)
             solver.advance(t_end - solver.t, (a.x, a.y, a.z, w.x, w.y, w.z),
                            None if set_omega is None else (set_omega.x, set_omega.y, set_omega.z))
-            n += compare_segment(("interval", k), ns, solver.angles, solver.angular_velocities) > 0
+            if compare_segment(("interval", k), ns, solver.angles, solver.angular_velocities):
+                n += 1
+            elif not rec.truncated or at[k] < rec.positions["joint_states"][-1]:  # a cut one lacks those after its last
+                missing += 1
+                first_missing = seconds(ns) if missing == 1 else first_missing
         for kind, j in [key for key in segments if key[0] == "start"]:  # compared, not counted: no re-simulated sample
             compare_segment((kind, j), rec.topics["sim_time"][start_at[j]][0] if j >= 0 else None, *initial)
     if n == 0:
