@@ -648,3 +648,17 @@ def test_a_whole_node_recording_without_some_joint_states_fails(tmp_path, capsys
     assert not r.ok and r.missing == missing and r.compared == 2000 - missing and r.max_deviation == 0.0
     rc, out = replay(path, capsys)
     assert rc == 1 and f"{missing} re-simulated samples (the first at t = " in out
+
+
+@pytest.mark.parametrize("lost", [("rachis/accel_applied",), ("rachis/accel_applied", "joint_states")])
+def test_a_node_recordings_sim_time_without_its_interval_is_refused(tmp_path, capsys, lost):
+    """A sim_time that follows no accel_applied at its stamp was passed over: with an interval's accel_applied and
+    state lost, the next interval was re-simulated over both with its own input, within the tolerance (ok, 1999
+    compared; found by dropping them from recordings/open_loop.mcap). Only a start's sim_time (0) ends no interval."""
+    lost = {absolute(topic) for topic in lost}
+    path = tmp_path / "lost.mcap"
+    _node_copy(path, lambda topic, t, typename, data: [] if topic in lost and t == 1_000_000_000 else [data])
+    with pytest.raises(RecordingError, match=r"sim_time logged at 1\.000000 s does not follow a rachis/accel_applied"):
+        check(path)
+    rc, out = replay(path, capsys)
+    assert rc == 2 and len(out.strip().splitlines()) == 1

@@ -422,9 +422,17 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         start = [m.clock.sec == 0 and m.clock.nanosec == 0 for _, m in rec.topics.get("sim_time", [])]
         starts = [pos for pos, s in zip(rec.positions.get("sim_time", []), start) if s]
         start_at = [i for i, s in enumerate(start) if s]  # their indices among the sim_time messages
-        # by position, as the interval's other messages: a stamp may end two intervals at two simulated times
-        ends = {k: to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec))
-                for k, m in _by_interval(rec, "sim_time", applied, at)[0].items() if m.clock.sec or m.clock.nanosec}
+        # by position, as the interval's other messages: a stamp may end two intervals at two simulated times. One that
+        # ends none (its accel_applied lost) is refused: its interval would be re-simulated into the next one's
+        ends = {}
+        for pos, (ns, m), s in zip(rec.positions.get("sim_time", []), rec.topics.get("sim_time", []), start):
+            k = bisect.bisect_left(at, pos) - 1
+            if s:
+                continue
+            if k < 0 or applied[k][0] != ns or k in ends:
+                raise RecordingError(f"{path}: sim_time logged at {_t(ns)} does not follow a rachis/accel_applied at "
+                                     f"its stamp (or follows one that has its sim_time)")
+            ends[k] = to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec))
         omega, stray = _by_interval(rec, "rachis/twist_applied", applied, at)
         if stray is not None:
             raise RecordingError(f"{path}: rachis/twist_applied logged at {_t(stray)} does not follow the "
