@@ -22,6 +22,7 @@ EV_DELTA, EV_PHI = 0, 1
 EV_FORCE = 2           # not an event: the pair's force, for the peak search (sampling.py), through the same maximiser
 N_SAMPLES = 4          # sub-intervals per step searched for a sign change (plus local-maximum refinement)
 ROOT_TOL = 1e-13       # s, absolute tolerance of event times
+ARGMAX_TOL = 1.5e-8    # of the step, the place of a maximum: √ε, below which its values differ by round-off only
 GOLDEN = 0.3819660112501051  # golden section, 1 − 1/φ (Brent's maximiser, brent_point)
 
 
@@ -126,11 +127,11 @@ def graze_possible(va, vb, sa, sb):
 @jit
 def largest_on(fn, sign, p, a, b, fa, fb, y0, q, h, M, contacts, kin, work, graze):
     """The largest sign·fn on [a, b] (θ units; fa, fb its values there), by Brent's method (brent_point): returns
-    (θ, value) once the bracket is ROOT_TOL wide, or for a graze search (`graze`) as soon as a value is positive or
-    the largest is far below zero. A graze and a force peak are smooth maxima, so the parabolic steps converge in a
-    few evaluations where golden sections alone took thirty to forty."""
+    (θ, value) once the bracket is ARGMAX_TOL wide (ROOT_TOL / h on a shorter step), or for a graze search (`graze`)
+    as soon as a value is positive or the largest is far below zero. A graze and a force peak are smooth maxima, so
+    the parabolic steps converge in a few evaluations where golden sections alone took thirty to forty."""
     pr = M.pair[p]
-    tol = ROOT_TOL / h
+    tol = max(ROOT_TOL / h, ARGMAX_TOL)
     x = w = v = a + GOLDEN * (b - a)
     dense_pair(x, y0, q, h, work, M, pr)
     fx = value_at(fn, sign, p, work, M, contacts, kin)
@@ -337,5 +338,5 @@ def check_bruising(bp, tot, M, pr, cfg):
         tot.bruising_impacts += 1
 
 
-__all__ = ["EV_DELTA", "EV_FORCE", "EV_PHI", "N_SAMPLES", "ROOT_TOL", "classify", "find_event", "switch_pair", "value_at",
-           "watched"]
+__all__ = ["ARGMAX_TOL", "EV_DELTA", "EV_FORCE", "EV_PHI", "N_SAMPLES", "ROOT_TOL", "classify", "find_event", "switch_pair",
+           "value_at", "watched"]

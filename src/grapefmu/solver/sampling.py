@@ -12,7 +12,8 @@ from ..physics.forces import active, berry_force, coupling, forces, pair_force, 
 from ..physics.kinematics import Workspace, berry_kinematics, kinematics, pair_state, rachis_frame
 from ..physics.layout import model_head, model_offsets
 from .broadphase import travel
-from .events import EV_FORCE, GOLDEN, N_SAMPLES, ROOT_TOL, brent_keep, brent_point, check_bruising, classify, largest_on
+from .events import (ARGMAX_TOL, EV_FORCE, GOLDEN, N_SAMPLES, ROOT_TOL, brent_keep, brent_point, check_bruising,
+                     classify, largest_on)
 from .step import dense_berry, dense_head, dense_pair, dense_rachis
 
 #: Boole's rule on the N_SAMPLES + 1 equally spaced samples: exact for quintics; its error per step,
@@ -338,8 +339,8 @@ def turns_near(t_end, t_1, t_2):
 
 @jit
 def largest_tension(i, a, b, t0, y0, q, h, M, X, inp, contacts, near, nnear, kin, work):
-    """Berry i's largest pedicel tension on [a, b] (θ units) by Brent's maximiser (events.brent_point), to ROOT_TOL."""
-    tol = ROOT_TOL / h
+    """Berry i's largest pedicel tension on [a, b] (θ units) by Brent's maximiser, as events.largest_on."""
+    tol = max(ROOT_TOL / h, ARGMAX_TOL)
     x = w = v = a + GOLDEN * (b - a)
     fx = tension_at(x, i, t0, y0, q, h, M, X, inp, contacts, near, nnear, kin, work)
     fw = fv = fx
