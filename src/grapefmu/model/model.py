@@ -217,8 +217,9 @@ class Model:
     def names(self) -> list[str]:
         return [b.name for b in self.berries]
 
-    @property
+    @cached_property
     def n_dof(self) -> int:
+        """Asked by every layout, Solver and run: summed once per model."""
         return sum(b.ndof for b in self.berries)
 
     @property
