@@ -152,23 +152,25 @@ def test_a_damaged_chunk_is_named_with_its_offset_and_time(recordings, tmp_path,
     assert r.returncode != 0 and "Traceback" not in r.stderr and "corrupted" in r.stderr
 
 
-def rewrite(original: Path, out: Path, change, compression=CompressionType.ZSTD, meta_change=None) -> None:
-    """Copy a recording message by message through the typestore, `change(topic, log_time, message)`
-    editing the decoded message in place (the CRCs are those of the new bytes), and `meta_change(metadata)` each
-    metadata record's map."""
+def rewrite(original: Path, out: Path, change, compression=CompressionType.ZSTD, meta_change=None,
+            chunk_size: int = 2048) -> None:
+    """Copy a recording message by message, in the file's order, through the typestore: `change(topic, log_time,
+    message)` edits the decoded message in place, or returns the messages written in its place (none: it is dropped;
+    the CRCs are those of the new bytes), and `meta_change(metadata)` each metadata record's map."""
     with open(original, "rb") as fh:
         reader = make_reader(fh)
         meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages()]
+        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages(log_time_order=False)]
     for data in meta.values() if meta_change else ():
         meta_change(data)
-    with McapWriter(out, compression=compression, chunk_size=2048) as w:
+    with McapWriter(out, compression=compression, chunk_size=chunk_size) as w:
         for name, data in meta.items():
             w.add_metadata(name, data)
         for typename, topic, t, data in msgs:
             m = deserialize(data, typename)
-            change(topic, t, m)
-            w.write(topic, m, t)
+            written = change(topic, t, m)
+            for x in (m,) if written is None else written:
+                w.write(topic, x, t)
 
 
 @pytest.mark.parametrize("field, delta, passes", [("position", 1e-3, False), ("velocity", 0.82, False),
@@ -491,23 +493,12 @@ def test_an_empty_file_and_a_damaged_end_magic_are_said_as_they_are(recordings, 
 def test_a_second_joint_state_at_a_stamp_is_compared_too(recordings, tmp_path, capsys, bad_first):
     """Recorded states were keyed by their stamp, so of two at one stamp the first was dropped unread: a state 0.5 rad
     off written before the true one passed (51 compared, deviation 0; found by rewriting a recording with a copy)."""
+    def twice(topic, t, m):
+        if topic == absolute("joint_states") and t == 20_000_000:
+            bad = moved(m, 0.5)
+            return (bad, m) if bad_first else (m, bad)
     path = tmp_path / "twice.mcap"
-    with open(recordings["chunked"], "rb") as fh:
-        reader = make_reader(fh)
-        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages()]
-    with McapWriter(path, chunk_size=2048) as w:
-        for name, data in meta.items():
-            w.add_metadata(name, data)
-        for typename, topic, t, data in msgs:
-            m = deserialize(data, typename)
-            if topic == absolute("joint_states") and t == 20_000_000:
-                bad = deserialize(data, typename)
-                bad.position = bad.position + 0.5
-                for x in ((bad, m) if bad_first else (m, bad)):
-                    w.write(topic, x, t)
-            else:
-                w.write(topic, m, t)
+    rewrite(recordings["chunked"], path, twice)
     r = check(path)
     assert not r.ok and r.unmatched == 1 and r.max_deviation == pytest.approx(0.5 if bad_first else 0.0)
     rc, out = replay(path, capsys)
@@ -534,16 +525,8 @@ def test_a_whole_recording_without_some_joint_states_fails(recordings, tmp_path,
     """A whole (not truncated) recording is one joint state per re-simulated sample. One left with every other state,
     or with the first alone, passed (26 or 1 compared, deviation 0; found by rewriting a recording without them)."""
     path = tmp_path / "sparse.mcap"
-    with open(recordings["chunked"], "rb") as fh:
-        reader = make_reader(fh)
-        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages()]
-    with McapWriter(path, chunk_size=2048) as w:
-        for name, data in meta.items():
-            w.add_metadata(name, data)
-        for typename, topic, t, data in msgs:
-            if not (topic == absolute("joint_states") and drop(t)):
-                w.write(topic, deserialize(data, typename), t)
+    rewrite(recordings["chunked"], path,
+            lambda topic, t, m: () if topic == absolute("joint_states") and drop(t) else None)
     r = check(path)
     assert not r.ok and r.missing == missing and r.first_missing == 0.001 and r.max_deviation == 0.0
     rc, out = replay(path, capsys)
@@ -578,25 +561,22 @@ def test_a_corrupted_recording_is_not_republished(recordings, tmp_path, capsys, 
     assert main(["replay", str(recordings["chunked"]), "--publish"]) == 0 and published == [str(recordings["chunked"])]
 
 
-def _node_copy(path: Path, edit) -> None:
+def _node_copy(path: Path, change) -> None:
     """recordings/open_loop.mcap (the lockstep node's: two states at t = 0, the start's and the answer to the first
-    input, then accel_applied, sim_time and joint_states per 1 ms interval), rewritten message by message in the
-    file's order: edit(topic, log time, typename, CDR bytes) gives the messages written in its place."""
-    with open(Path(__file__).parents[1] / "recordings" / "open_loop.mcap", "rb") as fh:
-        reader = make_reader(fh)
-        meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-        msgs = [(s.name, c.topic, m.log_time, bytes(m.data)) for s, c, m in reader.iter_messages(log_time_order=False)]
-    with McapWriter(path, chunk_size=1 << 16) as w:
-        for name, data in meta.items():
-            w.add_metadata(name, data)
-        for typename, topic, t, data in msgs:
-            for out in edit(topic, t, typename, data):
-                w.write_raw(topic, typename, out, t)
+    input, then accel_applied, sim_time and joint_states per 1 ms interval) rewritten (`rewrite`'s change)."""
+    rewrite(Path(__file__).parents[1] / "recordings" / "open_loop.mcap", path, change, chunk_size=1 << 16)
+
+
+def moved(m, by: float):
+    """A copy of joint state m with every angle moved by `by` rad."""
+    bad = deserialize(serialize(m), m.__msgtype__)
+    bad.position = bad.position + by
+    return bad
 
 
 def test_an_unchanged_copy_of_a_node_recording_passes(tmp_path):
     path = tmp_path / "copy.mcap"
-    _node_copy(path, lambda topic, t, typename, data: [data])
+    _node_copy(path, lambda *_: None)
     r = check(path)
     assert r.ok and r.compared == 2000 and r.max_deviation == 0.0 and r.unmatched == r.missing == 0
 
@@ -608,12 +588,9 @@ def test_a_second_state_at_a_node_recordings_stamp_is_compared_too(tmp_path, cap
     0.5 rad off written after the true one passed (2000 compared, deviation 0; found by an audit rewriting
     recordings/open_loop.mcap). Every state is compared with the re-simulation's at its place in the file, those at
     the start with the initial state."""
-    def twice(topic, t, typename, data):
-        if topic != absolute("joint_states") or t != stamp:
-            return [data]
-        bad = deserialize(data, typename)
-        bad.position = bad.position + 0.5
-        return [data, serialize(bad)]
+    def twice(topic, t, m):
+        if topic == absolute("joint_states") and t == stamp:
+            return m, moved(m, 0.5)
     path = tmp_path / "twice.mcap"
     _node_copy(path, twice)
     r = check(path)
@@ -630,7 +607,7 @@ def test_a_node_recordings_state_at_another_stamp_than_its_interval_fails(tmp_pa
     recordings/open_loop.mcap). A state at another stamp than its interval's is no sample's."""
     lost = (absolute("rachis/accel_applied"), absolute("sim_time"))
     path = tmp_path / "lost.mcap"
-    _node_copy(path, lambda topic, t, typename, data: [] if topic in lost and t == 1_000_000_000 else [data])
+    _node_copy(path, lambda topic, t, m: () if topic in lost and t == 1_000_000_000 else None)
     r = check(path)
     assert not r.ok and r.unmatched == 1 and r.first_unmatched == 1.0 and r.compared == 1999
     rc, out = replay(path, capsys)
@@ -643,7 +620,7 @@ def test_a_whole_node_recording_without_some_joint_states_fails(tmp_path, capsys
     recordings/open_loop.mcap with one state in ten passed (ok, 200 compared; found by an audit). In a whole file
     an interval without its state is missing (a cut file lacks those after its last state alone)."""
     path = tmp_path / "sparse.mcap"
-    _node_copy(path, lambda topic, t, typename, data: [data] if topic != absolute("joint_states") or kept(t) else [])
+    _node_copy(path, lambda topic, t, m: () if topic == absolute("joint_states") and not kept(t) else None)
     r = check(path)
     assert not r.ok and r.missing == missing and r.compared == 2000 - missing and r.max_deviation == 0.0
     rc, out = replay(path, capsys)
@@ -657,7 +634,7 @@ def test_a_node_recordings_sim_time_without_its_interval_is_refused(tmp_path, ca
     compared; found by dropping them from recordings/open_loop.mcap). Only a start's sim_time (0) ends no interval."""
     lost = {absolute(topic) for topic in lost}
     path = tmp_path / "lost.mcap"
-    _node_copy(path, lambda topic, t, typename, data: [] if topic in lost and t == 1_000_000_000 else [data])
+    _node_copy(path, lambda topic, t, m: () if topic in lost and t == 1_000_000_000 else None)
     with pytest.raises(RecordingError, match=r"sim_time logged at 1\.000000 s does not follow a rachis/accel_applied"):
         check(path)
     rc, out = replay(path, capsys)
