@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import copy
 import math
-from numbers import Integral
 from dataclasses import dataclass, field
+from numbers import Integral
 from typing import Any
 
 import numpy as np
