@@ -552,10 +552,10 @@ def refuse_out_of_range(**given) -> None:
         if x is None:
             continue
         b = bound(SolverSettings, name)
-        kind = Integral if name == "max_steps" else Real
+        counted = name == "max_steps"  # a count of steps: an integer
         v = _finite(x)
-        if v is None or not b.holds(v) or (kind is Integral and not isinstance(x, Integral)):
-            raise SolverError(f"{name}: expected {'an integer' if kind is Integral else 'a number'}"
+        if v is None or not b.holds(v) or (counted and not isinstance(x, Integral)):
+            raise SolverError(f"{name}: expected {'an integer' if counted else 'a number'}"
                               f"{b.allowed[len('a number'):]}, got {x!r}")
 
 
