@@ -245,3 +245,20 @@ def test_a_rachis_that_drags_berries_into_the_floor_is_warned_of():
     # a sine acceleration of 6 m/s² at 3 Hz from rest drifts at 6/(2π 3) = 0.32 m/s on average: 0.48 m in its 1.5 s,
     # through the wall 40 mm away (the case still serves as a hard contact for scipy's reference to agree with)
     assert warned == {"shaken against a wall"}
+
+
+def test_a_start_is_judged_in_the_start_orientation():
+    """An obstacle fixed in the world meets the berries where the rachis starts, in its start orientation: a
+    spherical berry (l = 50 mm, r = 12 mm) on a rachis rolled 90° about x starts at y = +50 mm, z = 0. A floor
+    55 mm down is clear of it (the file used to judge the start unturned and refuse it, while Solver ran it), and
+    the berry swings down onto it; a wall at y = 45 mm is 17 mm inside it, refused naming the wall's point."""
+    def doc(obstacle):
+        return {"berries": [{"name": "b", "kind": "spherical", "mass": 0.01, "radius": 0.012, "twig_length": 0.05,
+                             "hinge_x": 0.0, "angle": [0.0, 0.0]}],
+                "obstacles": [{"name": "o", "law": "kelvin-voigt", "stiffness": 3000.0, **obstacle}],
+                "excitation": {"kind": "none", "orientation": [math.pi / 2, 0.0, 0.0]}, "solver": {"t_end": 0.3}}
+    run = simulate(scene(doc({"point": [0.0, 0.0, -0.055], "normal": [0.0, 0.0, 1.0]})))
+    assert run.collision_count >= 1
+    with pytest.raises(GrapefmuError, match="17 mm inside obstacle 'o' in the initial state") as err:
+        scene(doc({"point": [0.0, 0.045, 0.0], "normal": [0.0, -1.0, 0.0]}))
+    assert err.value.key == "obstacles[0].point"

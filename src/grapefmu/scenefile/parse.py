@@ -115,11 +115,12 @@ def scene_from_dict(doc: dict[str, Any], base_dir: Path, source: str = "", name:
     solver = _solver(doc.get("solver", {}))
     check_state(len(model.pairs), solver.zeno_max_events)  # values in range that together would not fit
     excitation = _excitation(doc.get("excitation", {"kind": "none"}), base_dir, solver.t_end)
-    _check_overlap(model, angles)
     if not source:
         from .toml_out import dumps
         source = dumps({"name": name, **{k: v for k, v in doc.items() if k != "name"}})
-    return Scene(model, tuple(angles), tuple(rates), excitation, solver, thresholds, source, name)
+    scene = Scene(model, tuple(angles), tuple(rates), excitation, solver, thresholds, source, name)
+    _check_overlap(scene)
+    return scene
 
 
 def _berries(raw: Any) -> tuple[list[Berry], list[float], list[float]]:
@@ -518,17 +519,19 @@ def _thresholds(raw: Any) -> Thresholds:
                          for f in ("detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction")})
 
 
-def _check_overlap(model: Model, angles: list[float]) -> None:
+def _check_overlap(scene: Scene) -> None:
     """Reject starts, and hanging rest states, that overlap far beyond what a contact law can mean (a hinge_x or an
-    angle mistyped); a start is checked again, on the model's keys, wherever a scene is run (Solver)."""
+    angle mistyped); a start is checked again, on the model's keys, wherever a scene is run (Solver). The start is
+    the run's own: the rachis in its start orientation, where obstacles fixed in the world meet the berries."""
     from ..physics.kinematics import deepest_overlap, overlaps
+    from ..physics.layout import initial, layout_of
 
-    nd = model.n_dof
-    states = [("initial", np.r_[angles, np.zeros(nd)])]
+    model = scene.model
+    states = [("initial", initial(layout_of(scene), scene), scene.arrays)]
     if model.planar:
-        states.append(("hanging rest", np.zeros(2 * nd)))
-    for label, y in states:
-        hit = deepest_overlap(overlaps(y, model.arrays)[None], MAX_OVERLAP_FRACTION * model.contact_radius)
+        states.append(("hanging rest", np.zeros(2 * model.n_dof), model.arrays))
+    for label, y, arrays in states:
+        hit = deepest_overlap(overlaps(y, arrays)[None], MAX_OVERLAP_FRACTION * model.contact_radius)
         if hit is None:
             continue
         _, p, delta, limit = hit
