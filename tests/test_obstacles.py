@@ -247,6 +247,39 @@ def test_a_rachis_that_drags_berries_into_the_floor_is_warned_of():
     assert warned == {"shaken against a wall"}
 
 
+def _leaning(law: dict) -> dict:
+    """One berry (hinge at the origin, l = 50 mm, r = 12 mm) started touching a wall 5 mm to its right: hanging
+    straight it would be 7 mm inside, so it settles leaning on the wall (a berry held aside by a finger pad or a
+    crate wall). The normal is given at twice unit length: it is made unit."""
+    s0 = math.asin((0.005 - 0.012) / 0.05)
+    return {"berries": [{"name": "b", "mass": 0.01, "radius": 0.012, "twig_length": 0.05, "hinge_x": 0.0,
+                         "hinge_stiffness": 2e-3, "hinge_damping": 1e-3, "angle": s0}],
+            "obstacles": [{"name": "wall", "point": [0.005, 0.0, 0.0], "normal": [-2.0, 0.0, 0.0], **law}],
+            "solver": {"t_end": 3.0, "rtol": 1e-10, "atol": 1e-13}}
+
+
+@pytest.mark.parametrize("law, force", [
+    ({"law": "kelvin-voigt", "stiffness": 3000.0, "restitution": 0.5}, lambda d: 3000.0 * d),
+    ({"law": "hunt-crossley", "effective_modulus": 2e5, "restitution": 0.4},
+     lambda d: 4.0 / 3.0 * 2e5 * math.sqrt(0.012) * d ** 1.5),  # K = 4/3 E* √R*, R* = r: a sphere on a plane
+])
+def test_a_berry_leaning_on_a_wall_rests_where_its_torques_balance(law, force):
+    """The file accepts a berry whose hanging rest is inside an obstacle (it used to refuse it: "starts 7 mm inside
+    obstacle 'wall' in the hanging rest state", a check for mistyped hinges between berries), and the berry comes
+    to rest where gravity, the hinge and the wall's law balance about the hinge, solved here with brentq:
+    m g l sin s + k_h s + F(δ) l cos s = 0 with δ = r + l sin s − 5 mm."""
+    from scipy.optimize import brentq
+
+    run = simulate(scene(_leaning(law)))
+    m, g, l, r, kh = 0.01, 9.81, 0.05, 0.012, 2e-3
+    s = brentq(lambda s: m * g * l * math.sin(s) + kh * s + force(max(r + l * math.sin(s) - 0.005, 0.0)) * l
+               * math.cos(s), -0.3, 0.0, xtol=1e-15)
+    delta = r + l * math.sin(s) - 0.005
+    assert run.angles[-1, 0] == pytest.approx(s, rel=1e-9)  # measured 0 and 4e-15
+    assert run.penetration[-1, 0] == pytest.approx(delta, rel=1e-9)  # 6.5 µm and 76 µm
+    assert run.contact_force[-1, 0] == pytest.approx(force(delta), rel=1e-9)
+
+
 def test_a_start_is_judged_in_the_start_orientation():
     """An obstacle fixed in the world meets the berries where the rachis starts, in its start orientation: a
     spherical berry (l = 50 mm, r = 12 mm) on a rachis rolled 90° about x starts at y = +50 mm, z = 0. A floor

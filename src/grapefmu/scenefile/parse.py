@@ -522,16 +522,20 @@ def _thresholds(raw: Any) -> Thresholds:
 def _check_overlap(scene: Scene) -> None:
     """Reject starts, and hanging rest states, that overlap far beyond what a contact law can mean (a hinge_x or an
     angle mistyped); a start is checked again, on the model's keys, wherever a scene is run (Solver). The start is
-    the run's own: the rachis in its start orientation, where obstacles fixed in the world meet the berries."""
+    the run's own: the rachis in its start orientation, where obstacles fixed in the world meet the berries. The
+    hanging rest counts pairs of berries only: a berry held aside by a finger pad or leaning on a crate wall rests
+    against it."""
     from ..physics.kinematics import deepest_overlap, overlaps
     from ..physics.layout import initial, layout_of
 
     model = scene.model
-    states = [("initial", initial(layout_of(scene), scene), scene.arrays)]
+    bound = MAX_OVERLAP_FRACTION * model.contact_radius
+    states = [("initial", initial(layout_of(scene), scene), scene.arrays, bound)]
     if model.planar:
-        states.append(("hanging rest", np.zeros(2 * model.n_dof), model.arrays))
-    for label, y, arrays in states:
-        hit = deepest_overlap(overlaps(y, arrays)[None], MAX_OVERLAP_FRACTION * model.contact_radius)
+        berries = np.array([pr.j < model.n_berries for pr in model.pairs], dtype=bool)
+        states.append(("hanging rest", np.zeros(2 * model.n_dof), model.arrays, np.where(berries, bound, np.inf)))
+    for label, y, arrays, bounds in states:
+        hit = deepest_overlap(overlaps(y, arrays)[None], bounds)
         if hit is None:
             continue
         _, p, delta, limit = hit
