@@ -247,36 +247,45 @@ def test_a_rachis_that_drags_berries_into_the_floor_is_warned_of():
     assert warned == {"shaken against a wall"}
 
 
-def _leaning(law: dict) -> dict:
-    """One berry (hinge at the origin, l = 50 mm, r = 12 mm) started touching a wall 5 mm to its right: hanging
-    straight it would be 7 mm inside, so it settles leaning on the wall (a berry held aside by a finger pad or a
-    crate wall). The normal is given at twice unit length: it is made unit."""
-    s0 = math.asin((0.005 - 0.012) / 0.05)
-    return {"berries": [{"name": "b", "mass": 0.01, "radius": 0.012, "twig_length": 0.05, "hinge_x": 0.0,
-                         "hinge_stiffness": 2e-3, "hinge_damping": 1e-3, "angle": s0}],
-            "obstacles": [{"name": "wall", "point": [0.005, 0.0, 0.0], "normal": [-2.0, 0.0, 0.0], **law}],
-            "solver": {"t_end": 3.0, "rtol": 1e-10, "atol": 1e-13}}
+KV_WALL = ({"law": "kelvin-voigt", "stiffness": 3000.0, "restitution": 0.5}, lambda d: 3000.0 * d)
 
 
-@pytest.mark.parametrize("law, force", [
-    ({"law": "kelvin-voigt", "stiffness": 3000.0, "restitution": 0.5}, lambda d: 3000.0 * d),
+@pytest.mark.parametrize("law, force, pitch, attached", [
+    (*KV_WALL, 0.0, "world"),
     ({"law": "hunt-crossley", "effective_modulus": 2e5, "restitution": 0.4},
-     lambda d: 4.0 / 3.0 * 2e5 * math.sqrt(0.012) * d ** 1.5),  # K = 4/3 E* √R*, R* = r: a sphere on a plane
+     lambda d: 4.0 / 3.0 * 2e5 * math.sqrt(0.012) * d ** 1.5, 0.0, "world"),  # K = 4/3 E* √R*, R* = r on a plane
+    (*KV_WALL, 0.2, "world"),    # the rachis starts pitched: the wall stays where the world frame has it
+    (*KV_WALL, 0.2, "gripper"),  # ... or turns with the rachis
 ])
-def test_a_berry_leaning_on_a_wall_rests_where_its_torques_balance(law, force):
-    """The file accepts a berry whose hanging rest is inside an obstacle (it used to refuse it: "starts 7 mm inside
-    obstacle 'wall' in the hanging rest state", a check for mistyped hinges between berries), and the berry comes
-    to rest where gravity, the hinge and the wall's law balance about the hinge, solved here with brentq:
-    m g l sin s + k_h s + F(δ) l cos s = 0 with δ = r + l sin s − 5 mm."""
+def test_a_berry_leaning_on_a_wall_rests_where_its_torques_balance(law, force, pitch, attached):
+    """One berry (hinge at the origin, l = 50 mm, r = 12 mm) started touching a wall 5 mm to its right (x, in the
+    world frame or the rachis'; the normal given at twice unit length), on a rachis pitched by φ (REP-103: x turns
+    toward −z, so the twig's world angle is s − φ). Hanging straight it would be 7 mm inside, which the file
+    accepts (it used to refuse it: "starts 7 mm inside obstacle 'wall' in the hanging rest state", a check for
+    mistyped hinges between berries), and the berry comes to rest where gravity, the hinge and the wall's law
+    balance about the hinge, solved here with brentq: m g l sin(s − φ) + k_h s + F(δ) l cos w = 0 with
+    δ = r + l sin w − 5 mm, w = s − φ for a wall fixed in the world and s for one on the gripper."""
     from scipy.optimize import brentq
 
-    run = simulate(scene(_leaning(law)))
     m, g, l, r, kh = 0.01, 9.81, 0.05, 0.012, 2e-3
-    s = brentq(lambda s: m * g * l * math.sin(s) + kh * s + force(max(r + l * math.sin(s) - 0.005, 0.0)) * l
-               * math.cos(s), -0.3, 0.0, xtol=1e-15)
-    delta = r + l * math.sin(s) - 0.005
-    assert run.angles[-1, 0] == pytest.approx(s, rel=1e-9)  # measured 0 and 4e-15
-    assert run.penetration[-1, 0] == pytest.approx(delta, rel=1e-9)  # 6.5 µm and 76 µm
+    touching = math.asin((0.005 - r) / l)
+    doc = {"berries": [{"name": "b", "mass": m, "radius": r, "twig_length": l, "hinge_x": 0.0, "hinge_stiffness": kh,
+                        "hinge_damping": 1e-3, "angle": touching + (pitch if attached == "world" else 0.0)}],
+           "obstacles": [{"name": "wall", "point": [0.005, 0.0, 0.0], "normal": [-2.0, 0.0, 0.0], "attached": attached,
+                          **law}],
+           "excitation": {"kind": "none", "orientation": [0.0, pitch, 0.0]},
+           "solver": {"t_end": 3.0, "rtol": 1e-10, "atol": 1e-13}}
+    run = simulate(scene(doc))
+
+    def wall(s):
+        return s - pitch if attached == "world" else s
+
+    s = brentq(lambda s: m * g * l * math.sin(s - pitch) + kh * s + force(max(r + l * math.sin(wall(s)) - 0.005, 0.0))
+               * l * math.cos(wall(s)), -0.3, 0.3, xtol=1e-15)
+    delta = r + l * math.sin(wall(s)) - 0.005
+    assert delta > 1e-6
+    assert run.angles[-1, 0] == pytest.approx(s, rel=1e-9)  # measured within 1e-14
+    assert run.penetration[-1, 0] == pytest.approx(delta, rel=1e-9)  # 3.8 µm to 76 µm
     assert run.contact_force[-1, 0] == pytest.approx(force(delta), rel=1e-9)
 
 
