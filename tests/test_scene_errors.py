@@ -357,3 +357,15 @@ def test_a_table_built_in_code_with_rows_closer_than_the_solver_steps_is_refused
         assert by_file.value.why.split("row", 1)[1] == e.value.why.split("row", 1)[1]  # the same words after the path
     stairs = exc.zero_order_hold(np.array([[0.0, 1.0, 0.0], [0.05, -1.0, 0.0], [0.1, 0.0, 0.0]]))
     assert Solver(replace(sc, excitation=exc.table("csv", stairs))).run().t[-1] == 0.1
+
+
+@pytest.mark.parametrize("jf", [1e-16, 1e-20])
+def test_a_jerk_fraction_too_small_to_keep_its_ramps_is_refused(jf):
+    """Ramps shorter than 1e-15 s were merged away (pick_and_place drops a knot that close to the one before): the
+    move's acceleration became a triangle, and a 0.1 m move of 0.1 s ended at 0.083 m still moving at 1 m/s
+    (found by simulating it: the rachis was at 0.283 m at 0.3 s). A jerk_fraction below 0.001 is now refused."""
+    doc = dual(excitation={"kind": "pick-and-place", "moves": [{"displacement": [0.1, 0.0], "duration": 0.1}],
+                           "jerk_fraction": jf})
+    with pytest.raises(SceneError) as e:
+        scene(doc)
+    assert e.value.key == "excitation.jerk_fraction" and "[0.001, 0.25]" in str(e.value)
