@@ -6,6 +6,7 @@ import subprocess
 import sys
 from dataclasses import replace
 
+import numpy as np
 import pytest
 
 from grapefmu import SceneError, Solver, SolverError, simulate
@@ -31,6 +32,17 @@ from .conftest import dual, scene
     (lambda d: d.update(excitation={"kind": "sine", "amplitude": [1.0, math.inf], "frequency": 5.0}),
      "excitation.amplitude[1]", "m/s²"),
     (lambda d: d.update(excitation={"kind": "csv", "file": "missing.csv"}), "excitation.file", "cannot read"),
+    # a table's time out of order, or before 0 s, named by its row (they named none; an audit)
+    (lambda d: d.update(excitation={"kind": "csv", "text": "0,0,0\n0.2,1,0\n0.1,0,0\n", "after": "zero"}),
+     "excitation.text", "row 3 column time: 0.1 s is not after row 2's 0.2 s"),
+    (lambda d: d.update(excitation={"kind": "csv", "text": "time,ax,az\n-0.5,0,0\n1,0,0\n", "after": "zero"}),
+     "excitation.text", "row 1 column time: -0.5 s"),
+    # a turn planar berries cannot follow, named by the key that gives it (both were refused as excitation.file)
+    (lambda d: d.update(excitation={"kind": "pick-and-place", "moves": [
+        {"displacement": [0.0, 0.05], "duration": 0.5}, {"duration": 0.5, "rotation": [0.2, 0.0, 0.0]}]}),
+     "excitation.moves", "the angular acceleration at t = 0.5625 s turns the rachis about an axis other than its y"),
+    (lambda d: d.update(excitation={"kind": "csv", "text": "0,0,0,0,0,0,0\n1,0,0,0,0,0,3\n", "after": "zero"}),
+     "excitation.text", "the angular acceleration at t = 1 s turns the rachis about an axis other than its y"),
     (lambda d: d.update(gravity=-9.81), "gravity", "[0, 100]"),
     (lambda d: d.update(thresholds={"bruise_force": 0}), "thresholds.bruise_force", "(0, 10000] N"),
     (lambda d: d.update(berries=[]), "berries", "at least one"),
@@ -340,8 +352,6 @@ def test_a_table_built_in_code_with_rows_closer_than_the_solver_steps_is_refused
     check: its run stopped at t = 0 on "the step size fell below the resolution of time", a reason about stiffness
     that names no key. The scene refuses it as the file does, naming the excitation, the row and the spacing allowed.
     A time repeated on the next row (a staircase's doubled knot) is one breakpoint and runs."""
-    import numpy as np
-
     from grapefmu.model import excitation as exc
 
     sc = scene(dual(solver={"t_end": 0.1}))
@@ -369,3 +379,19 @@ def test_a_jerk_fraction_too_small_to_keep_its_ramps_is_refused(jf):
     with pytest.raises(SceneError) as e:
         scene(doc)
     assert e.value.key == "excitation.jerk_fraction" and "[0.001, 0.25]" in str(e.value)
+
+
+@pytest.mark.parametrize("jf", [0.0, 1e-16, 0.3, -0.1, math.nan, True])
+def test_pick_and_place_refuses_a_jerk_fraction_its_moves_cannot_keep(jf):
+    """In code, pick_and_place took any jerk_fraction: 0 made each move's acceleration a triangle that ended the move
+    off its displacement, 0.3 or -0.1 ramps that cross (times running backwards). It refuses them as a scene file
+    does, naming the key."""
+    from grapefmu.model.excitation import integrate_table, pick_and_place
+    with pytest.raises(SceneError) as e:
+        pick_and_place([((0.1, 0.0), 0.1)], jerk_fraction=jf)
+    assert e.value.key == "excitation.jerk_fraction" and "[0.001, 0.25]" in str(e.value)
+    for ok in (1e-3, 0.25):  # the ends of the range: the move ends at its displacement, at rest
+        rows = pick_and_place([((0.1, 0.0), 0.1)], jerk_fraction=ok).arrays.table
+        v, x = integrate_table(rows)
+        assert np.diff(rows[:, 0]).min() > 0.0
+        assert x[-1, 0] == pytest.approx(0.1, rel=1e-12) and abs(v[-1, 0]) < 1e-12

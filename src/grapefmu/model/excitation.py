@@ -13,13 +13,15 @@ import csv
 import functools
 import io
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from numbers import Real
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
 from ..errors import SceneError
+from .bounds import Bound
 
 CONSTANT, CHIRP, TABLE = 0, 1, 2
 
@@ -50,7 +52,7 @@ class Excitation:
     arrays: ExcitationArrays
     description: str = ""
     defined_until: float = math.inf
-    key: str = "excitation"   # the scene key to name when a run goes past defined_until
+    key: str = "excitation"   # the scene key that gives a table (file, text, moves), named when it is refused
     orientation: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
     angular_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     driven: bool = False  # a face's inputs may move and turn the rachis, whatever this excitation does
@@ -79,7 +81,6 @@ class Excitation:
 
     def starting(self, orientation=None, angular_velocity=None) -> "Excitation":
         """This excitation from another initial orientation (quaternion x, y, z, w) or angular velocity."""
-        from dataclasses import replace
         return replace(self, orientation=tuple(map(float, orientation if orientation is not None else self.orientation)),
                        angular_velocity=tuple(map(float, angular_velocity if angular_velocity is not None
                                                   else self.angular_velocity)))
@@ -117,6 +118,18 @@ def check_covers(ex: Excitation, t_end: float, t_key: str) -> None:
         raise SceneError(ex.key, f"the CSV ends at {ex.defined_until:g} s, before the run's end {t_end:g} s "
                                  f"({t_key}); say what follows its last row with after = \"hold\" (keep its "
                                  f"acceleration) or after = \"zero\" in [excitation], or extend the file")
+
+
+def check_times(t: np.ndarray, path: str, key: str) -> None:
+    """Refuse a table (its file or text at `path`, under the scene key `key`) whose times do not start at or after 0 s
+    and increase strictly from row to row, naming the row (counted from 1, after any header)."""
+    back = np.flatnonzero(np.diff(t) <= 0.0)
+    if back.size:
+        n = int(back[0]) + 1  # 0-based: the row not after the one above it
+        raise SceneError(key, f"{path} row {n + 1} column time: {float(t[n])!r} s is not after row {n}'s "
+                              f"{float(t[n - 1])!r} s (times must increase strictly: sort the rows, drop repeated ones)")
+    if t[0] < 0:
+        raise SceneError(key, f"{path} row 1 column time: {float(t[0])!r} s; the table must start at or after 0 s")
 
 
 def check_row_spacing(t: np.ndarray, path: str, key: str) -> None:
@@ -211,6 +224,13 @@ def integrate_table(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return v, x
 
 
+#: a pick-and-place move's acceleration ramps, as a fraction of its duration: at most a quarter (four ramps fill the
+#: move), at least 0.001 (a scene's move lasts at least 1e-3 s, so a ramp 1e-6 s, far from the 1e-15 s within which
+#: pick_and_place merges knots and from the solver's step floor, TIME_RESOLUTION: ramps that short were dropped, and
+#: a move ended off its displacement and still moving, tests/test_scene_errors.py)
+JERK_FRACTION = Bound(1e-3, 0.25)
+
+
 def pick_and_place(moves, start: float = 0.0, jerk_fraction: float = 0.125) -> Excitation:
     """Rest-to-rest moves in sequence, each (displacement, duration) or (displacement, duration, rotation):
     displacement (dx, dy, dz) in m (a pair is the planar (dx, dz)), rotation a rotation vector (rad, world axes:
@@ -220,6 +240,9 @@ def pick_and_place(moves, start: float = 0.0, jerk_fraction: float = 0.125) -> E
     linear and share one profile, so jerk is bounded, the gripper starts and ends every move at rest, and the
     rachis follows the moves exactly (to the solver's tolerance: a turn about a fixed axis integrates exactly).
     """
+    if isinstance(jerk_fraction, bool) or not isinstance(jerk_fraction, Real) or not JERK_FRACTION.holds(
+            jerk_fraction):
+        raise SceneError("excitation.jerk_fraction", f"expected {JERK_FRACTION.allowed}, got {jerk_fraction!r}")
     u, shape = _unit_move_profile(jerk_fraction)
     _, x_unit = integrate_table(np.column_stack([u, shape]))
     reach = x_unit[-1, 0]  # displacement of a unit-peak, unit-duration move
@@ -236,7 +259,7 @@ def pick_and_place(moves, start: float = 0.0, jerk_fraction: float = 0.125) -> E
             rows.append([tk, *(per_peak * sk)])
         t0 += dur
     desc = f"pick-and-place: {len(moves)} moves, {t0 - start:g} s from {start:g} s"
-    return table("pick-and-place", np.array(rows), desc)
+    return replace(table("pick-and-place", np.array(rows), desc), key="excitation.moves")
 
 
 def read_csv(text: str, path: str, key: str, hold: bool = False, after: str | None = None) -> Excitation:
@@ -261,10 +284,7 @@ def read_csv(text: str, path: str, key: str, hold: bool = False, after: str | No
             raise SceneError(key, f"{path} row {n}: values must be finite, got {r!r}")
         rows.append(vals)
     arr = np.array(rows)
-    if np.any(np.diff(arr[:, 0]) <= 0):
-        raise SceneError(key, f"{path}: time must increase strictly from row to row")
-    if arr[0, 0] < 0:
-        raise SceneError(key, f"{path}: time must start at or after 0 s")
+    check_times(arr[:, 0], path, key)
     check_row_spacing(arr[:, 0], path, key)
     if hold:
         arr = zero_order_hold(arr)
@@ -325,12 +345,7 @@ def read_pose_table(text: str, path: str, key: str) -> Excitation:
         rows.append([float(c) for c in r])
     arr = np.array(rows)
     t = arr[:, 0]
-    for n in range(1, len(t)):
-        if t[n] <= t[n - 1]:
-            raise SceneError(key, f"{path} row {n + 1} column time: {t[n]:g} s is not after row {n}'s {t[n - 1]:g} s "
-                                  "(times must increase strictly: sort the rows, drop repeated ones)")
-    if t[0] < 0:
-        raise SceneError(key, f"{path} row 1 column time: {t[0]:g} s; the table must start at or after 0 s")
+    check_times(t, path, key)
     if orientation == ORIENTATIONS[1]:
         norm = np.linalg.norm(arr[:, 4:8], axis=1)
         bad = np.flatnonzero(np.abs(norm - 1.0) > 1e-6)

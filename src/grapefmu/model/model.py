@@ -264,21 +264,28 @@ class Model:
         n = self.plane_normal(excitation)
         if n is None:
             return None
-        a = excitation.arrays
-        alpha = a.table[:, 4:7] if a.kind == TABLE else tuple(float(c) for c in a.par[3:6])
-        alpha_key = {"constant": "angular_accel", "impulse": "angular_peak", "sine": "angular_amplitude",
-                     "sweep": "angular_amplitude"}.get(excitation.kind, "file")
         if abs(n[2]) > 1e-9:
-            return ("excitation.orientation", f"the initial orientation tilts the rachis' y axis {math.degrees(math.asin(min(abs(n[2]), 1.0))):.3g}° "
-                    "out of the horizontal; planar berries swing in the rachis' x–z plane, which must stay vertical "
-                    "(turn about y and z only; use spherical berries for any orientation)")
-        for key, what, w in (("angular_velocity", "the initial angular velocity", tuple(map(float, excitation.angular_velocity))),
-                             (alpha_key, "the angular acceleration", alpha)):
-            if (any(c != 0.0 for c in w) if type(w) is tuple else w.any()) and off_axis(w, n):  # no turn: none across
-                return (f"excitation.{key}", f"{what} turns the rachis about an axis other than its y axis "
-                        f"{tuple(round(float(c), 6) for c in n)} (world); planar berries swing in the rachis' x–z "
-                        "plane and follow rotation about y only (use spherical berries for any rotation)")
-        return None
+            return ("excitation.orientation", f"the initial orientation tilts the rachis' y axis "
+                    f"{math.degrees(math.asin(min(abs(n[2]), 1.0))):.3g}° out of the horizontal; planar berries swing "
+                    "in the rachis' x–z plane, which must stay vertical (turn about y and z only; use spherical "
+                    "berries for any orientation)")
+        a = excitation.arrays
+        if off_axis(tuple(map(float, excitation.angular_velocity)), n):
+            key, what = "excitation.angular_velocity", "the initial angular velocity"
+        elif a.kind == TABLE:
+            rows = np.flatnonzero(across(a.table[:, 4:7], n))
+            if not rows.size:
+                return None
+            # a table's key is the one that gives it: its file, its text, or the moves it was made from
+            key, what = excitation.key, f"the angular acceleration at t = {a.table[rows[0], 0]:.9g} s"
+        elif off_axis(tuple(float(c) for c in a.par[3:6]), n):
+            key = {"constant": "angular_accel", "impulse": "angular_peak"}.get(excitation.kind, "angular_amplitude")
+            key, what = f"excitation.{key}", "the angular acceleration"
+        else:
+            return None
+        return (key, f"{what} turns the rachis about an axis other than its y axis {tuple(round(c, 6) for c in n)} "
+                "(world); planar berries swing in the rachis' x–z plane and follow rotation about y only (use "
+                "spherical berries for any rotation)")
 
     @property
     def body_names(self) -> list[str]:
@@ -475,9 +482,13 @@ def off_axis(w, n) -> bool:
         (x, y, z), (nx, ny, nz) = w, n
         tol = 1e-9 * max(abs(x), abs(y), abs(z), 1e-300)
         return abs(y * nz - z * ny) > tol or abs(z * nx - x * nz) > tol or abs(x * ny - y * nx) > tol
+    return bool(across(w, n).any())
+
+
+def across(w, n) -> np.ndarray:
+    """Which of the vectors w (..., 3) have a component across the unit axis n (relative 1e-9), a bool each."""
     w = np.asarray(w, dtype=float).reshape(-1, 3)
-    across = np.cross(w, n)
-    return bool(np.any(np.abs(across) > 1e-9 * np.maximum(np.abs(w).max(axis=1, keepdims=True), 1e-300)))
+    return np.any(np.abs(np.cross(w, n)) > 1e-9 * np.maximum(np.abs(w).max(axis=1, keepdims=True), 1e-300), axis=1)
 
 
 @dataclass(frozen=True)

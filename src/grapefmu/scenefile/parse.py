@@ -47,10 +47,6 @@ EXCITATION_KEYS = {
     "csv": {"kind", "file", "text", "hold", "after"} | START_KEYS,
     "pose-table": {"kind", "file", "text"},
 }
-#: the shortest acceleration ramp of a pick-and-place move, as a fraction of the move (its ramps are then at least
-#: 1e-6 s long, as a move lasts at least 1e-3 s: far from the 1e-15 s within which knots merge and from the solver's
-#: step floor, excitation.TIME_RESOLUTION)
-MIN_JERK_FRACTION = 1e-3
 SOLVER_KEYS = {"method", "rtol", "atol", "t_end", "output_interval", "fixed_step", "zeno_window", "zeno_max_events",
                "max_steps", "contact_location", "islands", "integrator"}
 THRESHOLD_KEYS = {"detachment_force", "bruise_force", "bruise_energy", "fatigue_fraction"}
@@ -488,9 +484,7 @@ def _motion(kind: str, raw: dict, key: str, base_dir: Path, t_end: float) -> exc
             r = v.vector(f"{mk}.rotation", m.get("rotation", [0.0, 0.0, 0.0]), 3, Bound(-4 * math.pi, 4 * math.pi,
                                                                                          unit="rad"))
             moves.append((d, T, r))
-        # at least MIN_JERK_FRACTION: pick_and_place merges knots within 1e-15 s, so ramps that short were dropped and a
-        # move ended off its displacement and still moving (tests/test_scene_errors.py)
-        jf = v.number(f"{key}.jerk_fraction", raw.get("jerk_fraction", 0.125), MIN_JERK_FRACTION, 0.25)
+        jf = v.within(f"{key}.jerk_fraction", raw.get("jerk_fraction", 0.125), exc.JERK_FRACTION)
         ex = exc.pick_and_place(moves, start, jf)
         peak = abs(ex.arrays.table[:, 1:4]).max()
         if peak > acc:
