@@ -343,16 +343,44 @@ def _by_interval(rec: Recording, topic: str, applied: list, at: list[int]) -> tu
     return out, stray
 
 
-def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
-    """Re-simulate a recording and compare its joint states. A truncated file is checked up to its last
-    complete chunk; a corrupted one raises CorruptRecording; `CheckResult.ok` says whether every deviation
-    is within `tolerance`."""
-    path = Path(path)
-    rec = read_recording(path, {"joint_states", "rachis/accel_applied", "rachis/twist_applied", "sim_time"})
-    scene, solver_cfg, method = _settings(path, rec)
-    n_dof = scene.model.n_dof
-    joints = joint_names(scene.model)
-    states = []  # (logged at = the header's stamp in ns, angles, rates), in the file's order
+class _Tally:
+    """What a check has compared so far: the largest deviations and where the worst was, the re-simulated samples
+    compared (`n`), and the recorded states no sample matched and the samples no recorded state did."""
+
+    def __init__(self) -> None:
+        self.n = 0
+        self.dq = self.dw = 0.0
+        self.worst, self.worst_t = -1.0, math.nan
+        self.unmatched, self.first_unmatched = 0, math.nan
+        self.missing, self.first_missing = 0, math.nan
+
+    def compare(self, ns: int, q, w, angles, rates) -> None:
+        """The recorded state (q, w) logged at ns against the re-simulated (angles, rates)."""
+        a, b = _deviation(angles, q), _deviation(rates, w)
+        self.dq, self.dw = max(self.dq, a), max(self.dw, b)
+        if max(a, b) > self.worst:
+            self.worst, self.worst_t = max(a, b), seconds(ns)
+
+    def no_sample(self, t: float) -> None:
+        """A recorded state at t (s) that no re-simulated sample matches."""
+        self.first_unmatched = t if not self.unmatched else self.first_unmatched
+        self.unmatched += 1
+
+    def no_state(self, t: float) -> None:
+        """A re-simulated sample at t (s) that the recording has no state for."""
+        self.first_missing = t if not self.missing else self.first_missing
+        self.missing += 1
+
+    def result(self, source: str, truncated: str | None, tolerance: float) -> CheckResult:
+        return CheckResult(self.n, self.dq, self.dw, source, truncated, self.worst_t, tolerance, self.unmatched,
+                           self.first_unmatched, self.missing, self.first_missing)
+
+
+def _joint_states(path: Path, rec: Recording, model) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """Every recorded joint state as (logged at = its header's stamp in ns, angles, rates), in the file's order;
+    a RecordingError for one that is not the recorded scene's."""
+    n_dof, joints = model.n_dof, joint_names(model)
+    states = []
     for ns, m in rec.topics.get("joint_states", []):
         q, w = np.array(m.position, dtype=float), np.array(m.velocity, dtype=float)
         if q.shape != (n_dof,) or w.shape != (n_dof,):
@@ -364,128 +392,148 @@ def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
         states.append((ns, q, w))
     if not states:
         raise RecordingError(f"{path}: no joint_states to compare")
+    return states
+
+
+def check(path: str | Path, tolerance: float = TOLERANCE) -> CheckResult:
+    """Re-simulate a recording and compare its joint states. A truncated file is checked up to its last
+    complete chunk; a corrupted one raises CorruptRecording; `CheckResult.ok` says whether every deviation
+    is within `tolerance`."""
+    path = Path(path)
+    rec = read_recording(path, {"joint_states", "rachis/accel_applied", "rachis/twist_applied", "sim_time"})
+    scene, solver_cfg, method = _settings(path, rec)
+    states = _joint_states(path, rec, scene.model)
     source = rec.metadata.get("input_source", "scene")
     if source not in ("scene", "applied"):  # simulate's and the node's (recorder.metadata)
         raise RecordingError(f"{path}: the recorded input_source {source!r} is neither 'scene' (grapefmu simulate) "
                              f"nor 'applied' (the ROS node)")
     scene = _pinned(scene, solver_cfg, method)
-    dq = dw = 0.0
-    worst, worst_t = -1.0, math.nan
-    n = unmatched = missing = 0
-    first_unmatched = first_missing = math.nan
-
-    def compare(t: int, q, w, angles, rates) -> None:
-        nonlocal dq, dw, worst, worst_t
-        a, b = _deviation(angles, q), _deviation(rates, w)
-        dq, dw = max(dq, a), max(dw, b)
-        if max(a, b) > worst:
-            worst, worst_t = max(a, b), seconds(t)
-
+    tally = _Tally()
     if source == "scene":
-        from ..solver.api import simulate
-        if scene.solver.islands == "auto" and _islands_from(solver_cfg) != ISLANDS_FROM:
-            # run under another "auto" rule (none before it existed: one step size), as that rule chose
-            islands = scene.model.n_berries >= _islands_from(solver_cfg)
-            scene = replace(scene, solver=replace(scene.solver, islands=islands))
-        run = simulate(scene, solver_cfg.get("t_end"), method=method, rtol=solver_cfg.get("rtol"),
-                       atol=solver_cfg.get("atol"), output_interval=solver_cfg.get("output_interval"),
-                       cross_check=False)
-        recorded: dict[int, list] = {}  # every state at a stamp, in the file's order: a second one is no sample's
-        for ns, q, w in states:
-            recorded.setdefault(ns, []).append((q, w))
-        last = max(recorded) if rec.truncated else math.inf  # a truncated file lacks the samples after its last
-        lacking = []
-        for k, t in enumerate(run.t):
-            if at_key := recorded.get(to_ns(t)):
-                compare(to_ns(t), *at_key.pop(0), run.angles[k], run.angular_velocities[k])
-                n += 1
-            elif to_ns(t) <= last:
-                lacking.append(t)
-        missing = len(lacking)  # states left out of a whole file, or a longer t_end or a finer grid than the run's
-        first_missing = float(lacking[0]) if lacking else math.nan
-        left = [ns for ns, v in recorded.items() for _ in v]  # a shorter t_end or a coarser grid than the run's
-        unmatched = len(left)
-        first_unmatched = seconds(min(left)) if left else math.nan
+        _check_run(rec, scene, solver_cfg, method, states, tally)
     else:
-        from ..solver.solver import Solver
-        # the node's solver is driven by its inputs (metadata "turning"). Recordings before it could say so had
-        # no turns: their solver carried the rachis' translation alone, as Solver(scene) does for a scene that
-        # moves it; one that holds it still needs a driven solver to take the recorded accelerations
-        driven = rec.metadata.get("turning") == "true" or not scene.excitation.moves
-        solver = Solver(scene, driven=driven)
-        initial = solver.angles.copy(), solver.angular_velocities.copy()
-        applied, at = rec.topics.get("rachis/accel_applied", []), rec.positions.get("rachis/accel_applied", [])
-        # each applied interval ends at a simulated time: `sim_time`, logged at the same stamp (its header is
-        # the ROS clock), or the stamp itself in recordings made before the node stamped with its clock
-        # the node's (re)starts: a sim_time of 0, which no interval ends at (recordings before it had none); its stamp
-        # may be an interval's (a reset before the clock moved), so it is left out of the intervals' ends
-        start = [m.clock.sec == 0 and m.clock.nanosec == 0 for _, m in rec.topics.get("sim_time", [])]
-        starts = [pos for pos, s in zip(rec.positions.get("sim_time", []), start) if s]
-        start_at = [i for i, s in enumerate(start) if s]  # their indices among the sim_time messages
-        # by position, as the interval's other messages: a stamp may end two intervals at two simulated times. One that
-        # ends none (its accel_applied lost) is refused: its interval would be re-simulated into the next one's
-        ends = {}
-        for pos, (ns, m), s in zip(rec.positions.get("sim_time", []), rec.topics.get("sim_time", []), start):
-            k = bisect.bisect_left(at, pos) - 1
-            if s:
-                continue
-            if k < 0 or applied[k][0] != ns or k in ends:
-                raise RecordingError(f"{path}: sim_time logged at {_t(ns)} does not follow a rachis/accel_applied at "
-                                     f"its stamp (or follows one that has its sim_time)")
-            ends[k] = to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec))
-        omega, stray = _by_interval(rec, "rachis/twist_applied", applied, at)
-        if stray is not None:
-            raise RecordingError(f"{path}: rachis/twist_applied logged at {_t(stray)} does not follow the "
-                                 f"rachis/accel_applied of its interval")
-        # every state the node published is its solver's at that place in the file: the one an interval reached, at
-        # its stamp after its accel_applied, again for a lockstep input at the current time; after a (re)start (or
-        # before the first interval) the initial state at the start's stamp. Keyed by interval, or start (-1: the
-        # first, in recordings without its sim_time 0)
-        segments: dict[tuple[str, int], list] = {}
-        for pos, state in zip(rec.positions["joint_states"], states):
-            k, j = bisect.bisect_left(at, pos) - 1, bisect.bisect_left(starts, pos) - 1
-            segments.setdefault(("interval", k) if k >= 0 and (j < 0 or at[k] > starts[j]) else ("start", j),
-                                []).append(state)
-
-        def compare_segment(key, stamp: int | None, angles, rates) -> int:
-            """Compare the states recorded at `key` and `stamp` (None: the first one's) with (angles, rates); how many
-            were. One at another stamp is no sample's (the accel_applied of its own interval lost, say)."""
-            nonlocal unmatched, first_unmatched
-            found = 0
-            for ns, q, w in segments.pop(key, []):
-                stamp = ns if stamp is None else stamp
-                if ns == stamp:
-                    compare(ns, q, w, angles, rates)
-                    found += 1
-                else:
-                    first_unmatched = seconds(ns) if not unmatched else first_unmatched
-                    unmatched += 1
-            return found
-        clocked = "sim_time" in rec.topics  # recordings before the node logged sim_time end an interval at its stamp
-        if clocked and rec.truncated and applied and len(applied) - 1 not in ends:
-            # cut between the last interval's accel_applied and its sim_time: where it ends is lost (in real time
-            # its stamp is the wall clock's, not an end), so it is not re-simulated
-            applied = applied[:-1]
-        for k, (ns, m) in enumerate(applied):
-            if clocked and k not in ends:
-                raise RecordingError(f"{path}: the interval whose rachis/accel_applied is logged at {_t(ns)} has no "
-                                     f"sim_time at its stamp, so where it ends is not known")
-            t_end = seconds(ends[k] if clocked else ns)
-            restarted = bisect.bisect_left(starts, at[k]) > bisect.bisect_left(starts, at[k - 1]) if k else False
-            if restarted or t_end < solver.t:  # the node was reset (older recordings: its time went back)
-                solver = Solver(scene, driven=driven)
-            a, w = m.accel.linear, m.accel.angular
-            set_omega = omega.get(k)
-            solver.advance(t_end - solver.t, (a.x, a.y, a.z, w.x, w.y, w.z),
-                           None if set_omega is None else (set_omega.x, set_omega.y, set_omega.z))
-            if compare_segment(("interval", k), ns, solver.angles, solver.angular_velocities):
-                n += 1
-            elif not rec.truncated or at[k] < rec.positions["joint_states"][-1]:  # a cut one lacks those after its last
-                missing += 1
-                first_missing = seconds(ns) if missing == 1 else first_missing
-        for kind, j in [key for key in segments if key[0] == "start"]:  # compared, not counted: no re-simulated sample
-            compare_segment((kind, j), rec.topics["sim_time"][start_at[j]][0] if j >= 0 else None, *initial)
-    if n == 0:
+        _check_node(path, rec, scene, states, tally)
+    if tally.n == 0:
         raise RecordingError(f"{path}: no recorded joint state matches a re-simulated time")
-    return CheckResult(n, dq, dw, source, rec.truncated, worst_t, tolerance, unmatched, first_unmatched, missing,
-                       first_missing)
+    return tally.result(source, rec.truncated, tolerance)
+
+
+def _check_run(rec: Recording, scene, solver_cfg: dict, method: str | None, states: list, tally: _Tally) -> None:
+    """A recording of `grapefmu simulate`: the scene run again with its settings, each output sample against the
+    recorded state at its time."""
+    from ..solver.api import simulate
+    if scene.solver.islands == "auto" and _islands_from(solver_cfg) != ISLANDS_FROM:
+        # run under another "auto" rule (none before it existed: one step size), as that rule chose
+        islands = scene.model.n_berries >= _islands_from(solver_cfg)
+        scene = replace(scene, solver=replace(scene.solver, islands=islands))
+    run = simulate(scene, solver_cfg.get("t_end"), method=method, rtol=solver_cfg.get("rtol"),
+                   atol=solver_cfg.get("atol"), output_interval=solver_cfg.get("output_interval"), cross_check=False)
+    recorded: dict[int, list] = {}  # every state at a stamp, in the file's order: a second one is no sample's
+    for ns, q, w in states:
+        recorded.setdefault(ns, []).append((q, w))
+    last = max(recorded) if rec.truncated else math.inf  # a truncated file lacks the samples after its last
+    for k, t in enumerate(run.t):
+        if at_key := recorded.get(to_ns(t)):
+            tally.compare(to_ns(t), *at_key.pop(0), run.angles[k], run.angular_velocities[k])
+            tally.n += 1
+        elif to_ns(t) <= last:  # states left out of a whole file, or a longer t_end or a finer grid than the run's
+            tally.no_state(float(t))
+    for ns in sorted(ns for ns, v in recorded.items() for _ in v):  # a shorter t_end or a coarser grid than the run's
+        tally.no_sample(seconds(ns))
+
+
+def _check_node(path: Path, rec: Recording, scene, states: list, tally: _Tally) -> None:
+    """A recording of the ROS node: its solver driven again through the recorded intervals (rachis/accel_applied,
+    ending at their sim_time, the angular velocity set by twist_applied), each state the node published against
+    its solver's at that place in the file."""
+    from ..solver.solver import Solver
+    # the node's solver is driven by its inputs (metadata "turning"). Recordings before it could say so had no turns:
+    # their solver carried the rachis' translation alone, as Solver(scene) does for a scene that moves it; one that
+    # holds it still needs a driven solver to take the recorded accelerations
+    driven = rec.metadata.get("turning") == "true" or not scene.excitation.moves
+    solver = Solver(scene, driven=driven)
+    initial = solver.angles.copy(), solver.angular_velocities.copy()
+    applied, at = rec.topics.get("rachis/accel_applied", []), rec.positions.get("rachis/accel_applied", [])
+    starts, start_stamps = _starts(rec)
+    ends = _ends(path, rec, applied, at)
+    omega, stray = _by_interval(rec, "rachis/twist_applied", applied, at)
+    if stray is not None:
+        raise RecordingError(f"{path}: rachis/twist_applied logged at {_t(stray)} does not follow the "
+                             f"rachis/accel_applied of its interval")
+    segments = _segments(rec, states, at, starts)
+
+    def compare_segment(key, stamp: int | None, angles, rates) -> int:
+        """Compare the states recorded at `key` and `stamp` (None: the first one's) with (angles, rates); how many
+        were. One at another stamp is no sample's (the accel_applied of its own interval lost, say)."""
+        found = 0
+        for ns, q, w in segments.pop(key, []):
+            stamp = ns if stamp is None else stamp
+            if ns == stamp:
+                tally.compare(ns, q, w, angles, rates)
+                found += 1
+            else:
+                tally.no_sample(seconds(ns))
+        return found
+
+    clocked = "sim_time" in rec.topics  # recordings before the node logged sim_time end an interval at its stamp
+    if clocked and rec.truncated and applied and len(applied) - 1 not in ends:
+        # cut between the last interval's accel_applied and its sim_time: where it ends is lost (in real time its
+        # stamp is the wall clock's, not an end), so it is not re-simulated
+        applied = applied[:-1]
+    for k, (ns, m) in enumerate(applied):
+        if clocked and k not in ends:
+            raise RecordingError(f"{path}: the interval whose rachis/accel_applied is logged at {_t(ns)} has no "
+                                 f"sim_time at its stamp, so where it ends is not known")
+        t_end = seconds(ends[k] if clocked else ns)
+        restarted = bisect.bisect_left(starts, at[k]) > bisect.bisect_left(starts, at[k - 1]) if k else False
+        if restarted or t_end < solver.t:  # the node was reset (older recordings: its time went back)
+            solver = Solver(scene, driven=driven)
+        a, w = m.accel.linear, m.accel.angular
+        set_omega = omega.get(k)
+        solver.advance(t_end - solver.t, (a.x, a.y, a.z, w.x, w.y, w.z),
+                       None if set_omega is None else (set_omega.x, set_omega.y, set_omega.z))
+        if compare_segment(("interval", k), ns, solver.angles, solver.angular_velocities):
+            tally.n += 1
+        elif not rec.truncated or at[k] < rec.positions["joint_states"][-1]:  # a cut one lacks those after its last
+            tally.no_state(seconds(ns))
+    for kind, j in [key for key in segments if key[0] == "start"]:  # compared, not counted: no re-simulated sample
+        compare_segment((kind, j), start_stamps[j] if j >= 0 else None, *initial)
+
+
+def _starts(rec: Recording) -> tuple[list[int], list[int]]:
+    """The node's (re)starts, a sim_time of 0 (which no interval ends at; recordings before it had none): their
+    positions in the file and their stamps. A start's stamp may be an interval's (a reset before the clock moved),
+    so it is left out of the intervals' ends (_ends)."""
+    starts = [(pos, ns) for pos, (ns, m) in zip(rec.positions.get("sim_time", []), rec.topics.get("sim_time", []))
+              if m.clock.sec == 0 and m.clock.nanosec == 0]
+    return [pos for pos, _ in starts], [ns for _, ns in starts]
+
+
+def _ends(path: Path, rec: Recording, applied: list, at: list[int]) -> dict[int, int]:
+    """Where each applied interval ends in simulated time (ns): its `sim_time`, logged at the same stamp (its header
+    is the ROS clock). Matched by position, as the interval's other messages: a stamp may end two intervals at two
+    simulated times. A sim_time that ends none (its accel_applied lost) is refused: its interval would be
+    re-simulated into the next one's."""
+    ends = {}
+    for pos, (ns, m) in zip(rec.positions.get("sim_time", []), rec.topics.get("sim_time", [])):
+        if m.clock.sec == 0 and m.clock.nanosec == 0:
+            continue  # a (re)start (_starts)
+        k = bisect.bisect_left(at, pos) - 1
+        if k < 0 or applied[k][0] != ns or k in ends:
+            raise RecordingError(f"{path}: sim_time logged at {_t(ns)} does not follow a rachis/accel_applied at "
+                                 f"its stamp (or follows one that has its sim_time)")
+        ends[k] = to_ns(stamp_seconds(m.clock.sec, m.clock.nanosec))
+    return ends
+
+
+def _segments(rec: Recording, states: list, at: list[int], starts: list[int]) -> dict[tuple[str, int], list]:
+    """The recorded states by where they sit in the file. Every state the node published is its solver's at that
+    place: the one an interval reached, at its stamp after its accel_applied (again for a lockstep input at the
+    current time); after a (re)start, or before the first interval, the initial state at the start's stamp. Keyed
+    ("interval", k), or ("start", j) (j = -1: the first start, in recordings without its sim_time 0)."""
+    segments: dict[tuple[str, int], list] = {}
+    for pos, state in zip(rec.positions["joint_states"], states):
+        k, j = bisect.bisect_left(at, pos) - 1, bisect.bisect_left(starts, pos) - 1
+        segments.setdefault(("interval", k) if k >= 0 and (j < 0 or at[k] > starts[j]) else ("start", j),
+                            []).append(state)
+    return segments
