@@ -352,3 +352,63 @@ def test_each_reason_for_a_rejection_is_logged_once_a_second(ros):
     finally:
         n.close()
         n.destroy_node()
+
+
+def _one_planar_berry(tmp_path, yaw: float) -> str:
+    """A scene of one planar berry on a rachis started turned `yaw` about z (its y axis, about which alone a planar
+    scene turns, is then (−sin yaw, cos yaw, 0) in the world)."""
+    path = tmp_path / f"yaw_{yaw:g}.toml"
+    path.write_text(f"""name = "yawed"
+[[berries]]
+name = "b"
+mass = 0.011
+radius = 0.0135
+twig_length = 0.03
+hinge_x = 0.0
+hinge_damping = 2.0e-5
+[excitation]
+kind = "none"
+orientation = [0.0, 0.0, {yaw!r}]
+""")
+    return str(path)
+
+
+@pytest.mark.parametrize("topic", ["rachis/pose", "rachis/twist"])
+def test_a_planar_scene_turned_about_z_follows_a_turn_about_its_y_axis(ros, tmp_path, topic):
+    """A planar scene started with a yaw turns about its y axis n = (−sin yaw, cos yaw, 0). A gripper that turns about
+    n (ω rising to 0.3 rad/s, then steady) on rachis/pose, or on rachis/twist as a robot gives it (its body rate
+    turned into the world, R(t) (0, ω, 0)), had its samples rejected once it turned steadily: the second difference
+    of the poses (the first of the twists) is α = 0 up to rounding, 1e-13 rad/s² that is all across n, so the node
+    said the gripper turned about another axis and stopped (lockstep t stuck at 0.6 s of 2 s, 140 poses rejected).
+    Gravity is along z, so the same berry in a scene without the yaw, turned about the world's y axis, is the
+    reference: it must swing exactly alike."""
+    from scipy.spatial.transform import Rotation
+
+    runs = []
+    for yaw in (0.0, 0.5):
+        n = node(mode="lockstep", scene=_one_planar_berry(tmp_path, yaw), pose_filter_hz=200.0)
+        start = Rotation.from_euler("z", yaw)
+        axis = start.apply([0.0, 1.0, 0.0])
+        turned, angles = 0.0, []
+        try:
+            for k in range(201):
+                t, w = 0.01 * k, min(0.5 * 0.01 * k, 0.3)
+                turned += w * 0.01
+                pose = Rotation.from_rotvec(turned * axis) * start
+                if topic == "rachis/pose":
+                    q = pose.as_quat()
+                    n.on_pose(serialize(msg("geometry_msgs/msg/PoseStamped", header=header(to_ns(t), "world"),
+                                            pose={"position": {"x": 0.0, "y": 0.0, "z": 0.0},
+                                                  "orientation": dict(zip("xyzw", q.tolist()))})))
+                else:
+                    n.on_twist(serialize(msg("geometry_msgs/msg/TwistStamped", header=header(to_ns(t), "world"),
+                                             twist={"linear": {"x": 0.0, "y": 0.0, "z": 0.0},
+                                                    "angular": dict(zip("xyz", pose.apply([0.0, w, 0.0]).tolist()))})))
+                angles.append(n.solver.angles[0])
+            assert n.rejected == 0 and n.solver.t == 2.0, (n.rejected, n.solver.t)
+            runs.append(np.array(angles))
+        finally:
+            n.close()
+            n.destroy_node()
+    assert np.abs(runs[0]).max() > 0.01  # the turn swings the berry
+    np.testing.assert_allclose(runs[1], runs[0], rtol=0, atol=1e-9)

@@ -444,9 +444,21 @@ class SimulatorNode(Node):
                 self._reject(what, f"stamp {t:.9f} s: stamps must increase (last {times[-2]:.9f} s)")
                 return False
             rates = [_difference(a, b, order) / (tb - ta) for (ta, a), (tb, b) in zip(seen, seen[1:])]
+            n = self.plane_normal
+            turn = next((w for w in (tuple(r[3:].tolist()) for r in rates) if off_axis(w, n)), None) if (
+                n is not None and order == 2) else None  # a twist's ω is judged as sent (_valid)
+            if turn is not None:
+                self._reject(what, f"the scene has planar berries, which swing in the rachis' x–z plane: the rachis "
+                                   f"may turn only about its y axis ({', '.join(f'{c:.6g}' for c in n)} in world); "
+                                   f"the poses turn at ω = {turn} rad/s (a scene of spherical berries follows any "
+                                   "rotation)")
+                return False
             raw = rates[0] if order == 1 else (rates[1] - rates[0]) / (0.5 * (times[2] - times[0]))
             alpha = 1.0 - math.exp(-2 * math.pi * self.get_parameter("pose_filter_hz").value * (times[-1] - times[-2]))
             acc = self._motion_acc + alpha * (raw - self._motion_acc)
+            if n is not None:  # turns about n alone (checked above, or ω by _valid): keep α along n, not its rounding
+                axis = np.array(n)
+                acc[3:] = float(np.dot(acc[3:], axis)) * axis
             held = tuple(acc)
         if not self._input(t, held, what, omega=omega):
             return False  # a rejected sample leaves no trace: not in the differences, not in the filter
