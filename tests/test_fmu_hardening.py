@@ -132,3 +132,27 @@ def test_a_c_host_without_python_runs_the_fmu_and_exits_cleanly(fmus, tmp_path, 
     ref = reference_angles(STOP, 1e-3, accel)
     assert np.max(np.abs(got[:, 1:] - ref)) < 1e-12
     assert np.max(np.abs(ref)) > 1e-2  # the berries really swung
+
+
+def test_every_refused_input_names_its_variable_and_range():
+    """A NaN or infinite input is refused at the set naming the input and the values it takes, as one out of range is:
+    within the solver's bound (±1000 m/s², ±10000 rad/s², ±100 rad/s), or only 0 for a turn a planar scene's rachis
+    cannot follow. A NaN on one of the latter (base_alpha_z, or base_alpha_x once initialization has fixed the
+    rachis' y axis) said only "expected a finite float", without the range."""
+    from grapefmu.scenefile import default_scene_path
+    from grapefmu_fmu.core import INPUT_BOUNDS, INPUTS, FmuCore
+
+    core = FmuCore(default_scene_path())
+    for phase in ("initialization", "step"):
+        if phase == "step":
+            assert core.initialize(0.0) is None
+        zero = {"base_alpha_z", "base_omega_z"} | (  # the default scene's plane normal is world y
+            {"base_alpha_x", "base_omega_x"} if phase == "step" else set())
+        for name in INPUTS:
+            allowed = "must be 0" if name in zero else f"within ±{INPUT_BOUNDS[name]:g} "
+            for value in (float("nan"), float("inf"), -float("inf"), 2.0 * INPUT_BOUNDS[name], 1.0):
+                problem = core.value_problem(name, value)
+                if value == 1.0 and name not in zero:
+                    assert problem is None
+                    continue
+                assert problem and name in problem and allowed in problem, (phase, name, value, problem)

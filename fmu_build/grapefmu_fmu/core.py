@@ -289,7 +289,7 @@ class FmuCore:
         else:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
         bound = self.input_bounds.get(name)
-        if not ok and not (bound and type(value) is float):  # an input's NaN or ±inf: its range says why
+        if not ok and not (bound is not None and type(value) is float):  # an input's NaN or ±inf: its range says why
             return f"{name} = {value!r}: expected a finite {kind.__name__}; value refused"
         if bound is not None and not abs(value) <= bound:
             what, _, unit = INPUT_KIND[name]
