@@ -156,3 +156,35 @@ def test_every_refused_input_names_its_variable_and_range():
                     assert problem is None
                     continue
                 assert problem and name in problem and allowed in problem, (phase, name, value, problem)
+
+
+def test_a_state_turning_about_its_yawed_axis_restores_in_an_instance_at_another_yaw():
+    """An FMU state brings its parameters: another instance's state at another yaw steps as that instance does. A
+    planar scene turned 0.5 rad in yaw turns about n = (−sin 0.5, cos 0.5, 0), so its state holds base_alpha_x ≠ 0,
+    which an instance at yaw 0 (n = world y) takes only as 0: setting the state was refused ('input base_alpha_x =
+    -0.96: ... must be 0') though the state turns about its own axis. It now restores, and steps on exactly as the
+    instance that took it; a state whose inputs turn across its own axis is still refused."""
+    import math
+
+    from grapefmu.errors import StateError
+    from grapefmu.scenefile import default_scene_path
+    from grapefmu_fmu.core import FmuCore
+
+    yawed, level = FmuCore(default_scene_path()), FmuCore(default_scene_path())
+    yawed.values["rachis_yaw"] = 0.5
+    assert yawed.initialize(0.0) is None and level.initialize(0.0) is None
+    n = (-math.sin(0.5), math.cos(0.5))
+    for name, c in zip(("base_alpha_x", "base_alpha_y"), n):
+        assert yawed.value_problem(name, 20.0 * c) is None
+        yawed.values[name] = 20.0 * c
+    assert yawed.step(0.0, 0.01) is None
+    state = yawed.get_state("step")
+    level.set_state(FmuCore.state_from_bytes(FmuCore.state_to_bytes(state)))
+    for core in (yawed, level):
+        assert core.step(0.01, 0.01) is None
+    np.testing.assert_array_equal(level.solver.y, yawed.solver.y)
+    assert abs(level.output("angle_left")) > 1e-4  # the turn swings the berries
+
+    state["values"]["base_alpha_x"] = -state["values"]["base_alpha_x"]  # now across the state's own axis
+    with pytest.raises(StateError, match="base_alpha_x = .*not along the rachis' y axis"):
+        FmuCore(default_scene_path()).set_state(state)

@@ -278,9 +278,9 @@ class FmuCore:
     def time(self) -> float:
         return self.solver.t if self.solver is not None else self.start_time
 
-    def value_problem(self, name: str, value) -> str | None:
-        """Why `value` cannot be set on variable `name`, or None. Inputs are checked here, when they are set;
-        parameters together with the scene when initialization ends."""
+    def value_problem(self, name: str, value, bounds: dict[str, float] | None = None) -> str | None:
+        """Why `value` cannot be set on variable `name`, or None. Inputs are checked here, when they are set, within
+        `bounds` (default input_bounds); parameters together with the scene when initialization ends."""
         kind = type(self.values[name])
         if kind is bool:
             ok = isinstance(value, (bool, int)) and value in (0, 1)
@@ -288,7 +288,7 @@ class FmuCore:
             ok = isinstance(value, int) and not isinstance(value, bool)
         else:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-        bound = self.input_bounds.get(name)
+        bound = (self.input_bounds if bounds is None else bounds).get(name)
         if not ok and not (bound is not None and type(value) is float):  # an input's NaN or ±inf: its range says why
             return f"{name} = {value!r}: expected a finite {kind.__name__}; value refused"
         if bound is not None and not abs(value) <= bound:
@@ -306,11 +306,11 @@ class FmuCore:
         return (f"this scene has planar berries, which swing in the rachis' x–z plane, so the rachis may turn only "
                 f"about its y axis {axis}: {zero} must be 0 (use spherical berries for any rotation)")
 
-    def _turn_problem(self, alpha: tuple, omega: tuple) -> str | None:
-        """Why a planar scene (plane_normal set) cannot take this held angular acceleration and angular velocity
-        (about an axis other than its plane's normal), or None: the solver's own check, made here so the step is
-        refused (Error) rather than attempted (Discard)."""
-        n = self.plane_normal
+    def _turn_problem(self, alpha: tuple, omega: tuple, n: tuple | None = None) -> str | None:
+        """Why a planar scene (plane_normal set, or its normal n) cannot take this held angular acceleration and
+        angular velocity (about an axis other than its plane's normal), or None: the solver's own check, made here so
+        the step is refused (Error) rather than attempted (Discard)."""
+        n = self.plane_normal if n is None else n
         for names, w in zip((ACCEL_INPUTS[3:], OMEGA_INPUTS), (alpha, omega)):
             if off_axis(w, n):
                 return (f"inputs {', '.join(f'{k} = {x!r}' for k, x in zip(names, w))}: not along the rachis' y axis "
@@ -434,8 +434,12 @@ class FmuCore:
         values = state["values"]
         if set(values) != set(self.values):
             raise StateError(f"FMU state: variables {sorted(set(values) ^ set(self.values))[:5]} do not match this FMU's")
+        # inputs within the solver's bounds here; the turns a planar scene takes depend on the state's own orientation
+        # parameters (another instance's yaw), judged below once its solver says which axis that is
+        bounds = INPUT_BOUNDS if state.get("solver") is not None else None
         for name, x in values.items():
-            problem = self.value_problem(name, x) if type(x) is type(self.values[name]) else f"{name}: wrong type"
+            problem = self.value_problem(name, x, bounds) if type(x) is type(self.values[name]) else \
+                f"{name}: wrong type"
             if problem:
                 raise StateError(f"FMU state: {problem}")
         phase = state.get("phase")
@@ -445,6 +449,10 @@ class FmuCore:
         if state["solver"] is not None:
             same = self.solver is not None and all(values[k] == self.values[k] for k in self._parameters)
             solver = self.solver if same else Solver(self.scene_from_parameters(values), driven=True)
+            n = solver.model.plane_normal(solver.scene.excitation)
+            problem = n and self._turn_problem(self._held(values)[3:], self._omega(values), tuple(map(float, n)))
+            if problem:
+                raise StateError(f"FMU state: {problem}")
             solver.set_state(state["solver"])  # refuses before anything changes
         self._use(solver)
         if solver is not None:
