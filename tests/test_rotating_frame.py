@@ -949,6 +949,32 @@ def test_a_yawed_planar_scene_turns_about_its_plane_normal_only():
     scene(planar_pair({**ex, "angular_amplitude": [2.0 * c for c in n], "angular_velocity": n}))
 
 
+def test_a_yawed_planar_scene_takes_the_rounding_of_a_turn_as_no_turn():
+    """A master that integrates α into ω component by component, turning a yawed planar scene about its axis and back
+    to rest, sends ω = (1.9e-16, -1.4e-16, 0) rad/s: rounding, all of it across the axis. Judged relative to itself
+    (1e-9 of the vector) it was a turn about another axis and the step was refused (the FMU returned Error). Below
+    ACROSS_FLOOR it is none; a turn across the axis at the floor's scale still is, and the state is kept."""
+    from grapefmu import Solver, SolverError
+    from grapefmu.model.model import ACROSS_FLOOR
+    yaw = 0.5
+    n = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+    sc = scene(planar_pair({"kind": "none", "orientation": [0.0, 0.0, yaw]}))
+    s = Solver(sc, driven=True)
+    omega = np.zeros(3)
+    for a in [3.0] * 100 + [-3.0] * 100:  # ω summed per component, as a master's integrator does: about n, then back
+        omega = omega + a * 1e-3 * n
+    rest = tuple(float(c) for c in omega)
+    assert 0.0 < max(map(abs, rest)) < 1e3 * ACROSS_FLOOR  # rounding, not exactly 0 ...
+    assert np.abs(np.cross(rest, n)).max() > 1e-9 * max(map(abs, rest))  # ... and across n, to the relative test
+    s.advance(0.01, (0.0,) * 6, rest)
+    assert s.t == pytest.approx(0.01)
+    across = (0.0, 0.0, 10 * ACROSS_FLOOR)
+    before = s.get_state()
+    with pytest.raises(SolverError, match="angular_velocity"):
+        s.advance(0.01, (0.0,) * 6, across)
+    assert s.t == before.physical.t[0]
+
+
 def test_a_constant_angular_acceleration_about_x_is_refused_for_planar_berries():
     ex = {"kind": "constant", "accel": [0.0, 0.0, 0.0], "angular_accel": [0.3, 0.0, 0.0]}
     with pytest.raises(SceneError) as err:

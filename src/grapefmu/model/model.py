@@ -475,20 +475,29 @@ class Thresholds:
     fatigue_fraction: float = bounded(0.0, 1.0, lo_open=True, default=0.5)
 
 
+#: rad/s (of ω) or rad/s² (of α): a component across a planar scene's axis below this, or 1e-9 of the vector, is
+#: rounding, not a turn (one turn in 2e5 years). Without it, a master that integrates α into ω component by component
+#: sent a yawed scene's turn come back to rest as ω = (1.9e-16, -1.4e-16, 0) rad/s, all of it across the axis, and
+#: the FMU refused the step
+ACROSS_FLOOR = 1e-12
+
+
 def off_axis(w, n) -> bool:
-    """Whether any of the vectors w (..., 3) has a component across the unit axis n (relative 1e-9). One vector
-    given as a tuple (what a face's step holds) is checked in plain Python: numpy's calls cost tens of µs."""
+    """Whether any of the vectors w (..., 3) has a component across the unit axis n (beyond 1e-9 of it and
+    ACROSS_FLOOR). One vector given as a tuple (what a face's step holds) is checked in plain Python: numpy's calls
+    cost tens of µs."""
     if type(w) is tuple and len(w) == 3:
         (x, y, z), (nx, ny, nz) = w, n
-        tol = 1e-9 * max(abs(x), abs(y), abs(z), 1e-300)
+        tol = max(1e-9 * max(abs(x), abs(y), abs(z)), ACROSS_FLOOR)
         return abs(y * nz - z * ny) > tol or abs(z * nx - x * nz) > tol or abs(x * ny - y * nx) > tol
     return bool(across(w, n).any())
 
 
 def across(w, n) -> np.ndarray:
-    """Which of the vectors w (..., 3) have a component across the unit axis n (relative 1e-9), a bool each."""
+    """Which of the vectors w (..., 3) have a component across the unit axis n (off_axis), a bool each."""
     w = np.asarray(w, dtype=float).reshape(-1, 3)
-    return np.any(np.abs(np.cross(w, n)) > 1e-9 * np.maximum(np.abs(w).max(axis=1, keepdims=True), 1e-300), axis=1)
+    return np.any(np.abs(np.cross(w, n)) > np.maximum(1e-9 * np.abs(w).max(axis=1, keepdims=True), ACROSS_FLOOR),
+                  axis=1)
 
 
 @dataclass(frozen=True)
