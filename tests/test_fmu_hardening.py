@@ -158,6 +158,23 @@ def test_every_refused_input_names_its_variable_and_range():
                 assert problem and name in problem and allowed in problem, (phase, name, value, problem)
 
 
+def test_a_communication_step_longer_than_any_run_is_discarded_naming_the_longest():
+    """A step of 1.7e9 s (a master's wall-clock time taken as its step) was Discarded with the solver's words on a
+    hinge too stiff for 2.5e8 steps, which named the hinge, not the step. It is Discarded (a master may retry shorter)
+    naming the step's range, the state kept; the longest step, the longest run's, is taken."""
+    from grapefmu.scenefile import default_scene_path
+    from grapefmu.solver.solver import LONGEST_STEP
+    from grapefmu_fmu.core import DISCARD, FmuCore
+
+    core = FmuCore(default_scene_path())
+    assert core.initialize(0.0) is None
+    before = core.solver.get_state()
+    status, why = core.step(0.0, 1.7e9)
+    assert status == DISCARD and f"dt: expected a step in (0, {LONGEST_STEP:g}] s" in why, why
+    assert core.solver.t == 0.0 and np.array_equal(core.solver.state.physical.y, before.physical.y)
+    assert core.step(0.0, 1e-3) is None and core.solver.t == 1e-3
+
+
 def test_a_state_turning_about_its_yawed_axis_restores_in_an_instance_at_another_yaw():
     """An FMU state brings its parameters: another instance's state at another yaw steps as that instance does. A
     planar scene turned 0.5 rad in yaw turns about n = (−sin 0.5, cos 0.5, 0), so its state holds base_alpha_x ≠ 0,

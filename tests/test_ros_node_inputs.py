@@ -219,18 +219,26 @@ def test_diagnostics_warn_of_berries_pressed_past_any_contact_law(ros, tmp_path)
 
 
 def test_a_stamp_the_node_cannot_take_does_not_lock_out_the_inputs_after_it(ros):
-    """Lockstep: an input stamped 1e6 s is refused (the step is too long); the valid inputs after it used to be
-    rejected as going back before 1e6 s, and the node stayed stuck until a reset. Real time: an input stamped an hour
-    ahead was taken, and every correctly stamped one after it rejected while the stale acceleration was held."""
+    """Lockstep: an input stamped 1e6 s, or with the wall clock's 1.7e9 s, is rejected as a stamp beyond the longest
+    step (it was refused as a step whose 2.5e8 solver steps a hinge too stiff would need, which named the hinge, not
+    the stamp); the valid inputs after it used to be rejected as going back before it, and the node stayed stuck
+    until a reset. Real time: an input stamped an hour ahead was taken, and every correctly stamped one after it
+    rejected while the stale acceleration was held."""
+    import types
+
     n = node(mode="lockstep")
+    said = []
+    n.get_logger = lambda: types.SimpleNamespace(warning=lambda m, **_: said.append(m), error=said.append)
     try:
         for t in (0.01, 0.02, 0.03):
             accel(n, t, 1.0)
         accel(n, 1e6, 2.0)
-        assert n.failures == 1 and n.solver.t == 0.03
+        accel(n, 1.7e9, 2.0)
+        assert n.rejected == 2 and n.failures == 0 and n.solver.t == 0.03
+        assert len(said) == 1 and "lockstep stamps are simulated time from 0 s (a wall-clock stamp?)" in said[0], said
         for t in (0.04, 0.05):
             accel(n, t, 3.0)
-        assert n.solver.t == 0.05 and n.rejected == 0 and n.accel[0] == 3.0
+        assert n.solver.t == 0.05 and n.rejected == 2 and n.accel[0] == 3.0
     finally:
         n.close()
         n.destroy_node()

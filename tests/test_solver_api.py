@@ -65,6 +65,8 @@ def test_state_roundtrip_replays_bit_for_bit(collision_scene):
 
 @pytest.mark.parametrize("dt, accel, words", [
     (0.0, None, "dt"), (-1e-3, None, "dt"), (float("nan"), None, "dt"),
+    # longer than any run: a wall-clock stamp's step was refused as a hinge too stiff for 2.5e8 steps, naming the hinge
+    (1.7e9, None, r"dt: expected a step in \(0, 100000\] s \(the longest run, solver.t_end\), got 1700000000.0"),
     (1e-3, (float("nan"), 0.0), "base_accel"), (1e-3, (0.0, float("inf")), "base_accel"),
 ])
 def test_bad_advance_is_refused_and_leaves_the_state(collision_scene, dt, accel, words):

@@ -33,6 +33,7 @@ from grapefmu.model.model import off_axis
 from grapefmu.scenefile import default_scene_path
 from grapefmu.model.excitation import MAX_ACCEL, MAX_ANGULAR_ACCEL, MAX_ANGULAR_VELOCITY
 from grapefmu.solver.warmup import notice
+from grapefmu.solver.solver import LONGEST_STEP
 from grapefmu.recording import frames, messages as msgs
 from grapefmu.recording.stamps import seconds, stamp_seconds, to_ns
 from grapefmu.recording.typestore import deserialize, serialize
@@ -358,6 +359,11 @@ class SimulatorNode(Node):
                                f"({now:.9f} s): a clock set wrong, or another time base (use_sim_time)")
             return False
         if self.mode == "lockstep" and not self.paused:
+            if t_in - self.solver.t > LONGEST_STEP:
+                self._reject(what, f"stamp {t_in:.9f} s is {t_in - self.solver.t:.6g} s after the simulated time "
+                                   f"{self.solver.t:.9f} s, more than the longest step ({LONGEST_STEP:g} s): lockstep "
+                                   "stamps are simulated time from 0 s (a wall-clock stamp?)")
+                return False
             if t_in > self.solver.t:
                 if not self.advance(t_in - self.solver.t):
                     return False  # refused: the stamp is not taken, so the next input may still come before it

@@ -336,7 +336,7 @@ class Solver:
         The common call (a float step, a tuple of six floats, ω None or a tuple of three floats) is checked inline
         and goes to the compiled side as one Session: a face's step costs under 2 µs more than its physics
         (docs/solver.md)."""
-        if type(dt) is not float or not 0.0 < dt < math.inf:
+        if type(dt) is not float or not 0.0 < dt <= LONGEST_STEP:
             dt = _step_size(dt)
         if base_accel is None:
             held, a = False, _NO_ACCEL
@@ -572,11 +572,17 @@ def _finite(x) -> float | None:
     return v if math.isfinite(v) else None
 
 
+#: s: the longest step advance takes, the longest run (solver.t_end). A longer one is no step of a co-simulation: a
+#: wall-clock stamp (1.7e9 s) sent to a lockstep node was refused as a hinge too stiff for 2.5e8 steps
+LONGEST_STEP = bound(SolverSettings, "t_end").hi
+
+
 def _step_size(dt) -> float:
     """dt as a float, or a SolverError: the checks behind advance's inline one, with the message."""
     v = _finite(dt)
-    if v is None or not v > 0.0:
-        raise SolverError(f"dt: expected a finite step > 0 s, got {dt!r}")
+    if v is None or not 0.0 < v <= LONGEST_STEP:
+        raise SolverError(f"dt: expected a step in (0, {LONGEST_STEP:g}] s (the longest run, solver.t_end), "
+                          f"got {dt!r}")
     return v
 
 
