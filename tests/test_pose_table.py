@@ -189,6 +189,25 @@ def test_the_rachis_turns_with_a_sampled_motion_to_the_schemes_error(tmp_path, r
     assert 0.7 * order < err[50] / err[100] < 1.3 * order, err
 
 
+def test_a_table_that_turns_more_than_once_about_a_fixed_axis_is_followed(tmp_path):
+    """A table may turn any number of times about a fixed axis: its rotation vectors were unwrapped only through ±π,
+    so a turn of more than 2π from its first row jumped, and was refused as one ("a jump the interpolation cannot
+    follow"). Against the analytic turn (1.5 turns in yaw), at 100 Hz, to the scheme's error scaled to the angle
+    (the test above: 2e-6 rad for 0.5 rad). About a moving axis, the rotation vector is singular at whole turns: a
+    table that passes near one is still refused as a jump, naming the row."""
+    from scipy.spatial.transform import Rotation
+
+    rpy = (0.0, 0.0, 3 * math.pi)
+    run = simulate(scene(spherical_table_scene(turning_table(tmp_path / "p.csv", 100, rpy))))
+    u = minimum_jerk(run.t)[0][:, None] / DX
+    err = (Rotation.from_euler("xyz", u * np.array(rpy)).inv() * Rotation.from_quat(run.base_orientation)).magnitude()
+    assert err.max() < 2e-6 * 3 * math.pi / 0.5, err.max()
+    assert err[-1] < 1e-6 and np.abs(run.base_angular_velocity[-1]).max() < 1e-6  # at rest, turned as the table ends
+    assert run.ledger_error() < 1e-8
+    with pytest.raises(GrapefmuError, match=r"row \d+ columns roll, pitch, yaw: .* a jump the interpolation"):
+        scene(spherical_table_scene(turning_table(tmp_path / "q.csv", 100, (0.1, 0.1, -2.2 * math.pi))))
+
+
 def test_a_planar_scene_refuses_a_table_that_rolls(tmp_path):
     path = turning_table(tmp_path / "roll.csv", 100, (0.2, 0.0, 0.0))
     with pytest.raises(GrapefmuError) as err:

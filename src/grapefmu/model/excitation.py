@@ -398,15 +398,21 @@ def read_pose_table(text: str, path: str, key: str) -> Excitation:
 
 
 def _unwrapped(phi: np.ndarray) -> np.ndarray:
-    """Rotation vectors made continuous: each row the one of its two equivalents (φ, φ − 2π φ/|φ|) nearer the
-    previous row's (as_rotvec keeps |φ| ≤ π, so a turn through π would jump)."""
+    """Rotation vectors made continuous: each row the one of its equivalents û (θ + 2πk), k any integer, nearest the
+    previous row's (as_rotvec keeps θ = |φ| ≤ π, so a turn through π would jump), so a table may turn any number of
+    times. The identity's (θ = 0) are the multiples of 2π along any axis: along the previous row's."""
     out = phi.copy()
     for k in range(1, len(out)):
-        theta = np.linalg.norm(out[k])
+        prev, theta = out[k - 1], float(np.linalg.norm(out[k]))
         if theta > 0.0:
-            other = out[k] - 2.0 * math.pi * out[k] / theta
-            if np.linalg.norm(other - out[k - 1]) < np.linalg.norm(out[k] - out[k - 1]):
-                out[k] = other
+            u = out[k] / theta
+        elif prev.any():
+            u = prev / np.linalg.norm(prev)
+        else:
+            continue
+        turns = round((float(u @ prev) - theta) / (2.0 * math.pi))  # the nearest, or one beside it
+        out[k] = min((u * (theta + 2.0 * math.pi * m) for m in (turns - 1, turns, turns + 1)),
+                     key=lambda c: float(np.linalg.norm(c - prev)))
     return out
 
 
