@@ -44,6 +44,25 @@ def dual(left: dict | None = None, right: dict | None = None, contact: dict | No
     return doc
 
 
+def one_planar_berry(yaw: float, excitation: str = "", kind: str = "none") -> str:
+    """The TOML of a scene of one planar berry on a rachis started turned `yaw` about z (its y axis, about which alone
+    a planar scene turns, is then (−sin yaw, cos yaw, 0) in the world), its excitation of `kind` with the further
+    keys `excitation` (TOML lines)."""
+    return f"""name = "yawed"
+[[berries]]
+name = "b"
+mass = 0.011
+radius = 0.0135
+twig_length = 0.03
+hinge_x = 0.0
+hinge_damping = 2.0e-5
+[excitation]
+kind = "{kind}"
+orientation = [0.0, 0.0, {yaw!r}]
+{excitation}
+"""
+
+
 def scene(doc: dict):
     return scene_from_dict(copy.deepcopy(doc), Path.cwd())
 

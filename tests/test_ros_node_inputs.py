@@ -20,6 +20,7 @@ from grapefmu.recording.replay import check, read_recording  # noqa: E402
 from grapefmu.recording.stamps import to_ns  # noqa: E402
 from grapefmu.recording.typestore import header, msg, serialize  # noqa: E402
 
+from .conftest import one_planar_berry  # noqa: E402
 from .test_ros_node import ENV, ros  # noqa: E402,F401
 
 
@@ -362,22 +363,9 @@ def test_each_reason_for_a_rejection_is_logged_once_a_second(ros):
         n.destroy_node()
 
 
-def _one_planar_berry(tmp_path, yaw: float) -> str:
-    """A scene of one planar berry on a rachis started turned `yaw` about z (its y axis, about which alone a planar
-    scene turns, is then (−sin yaw, cos yaw, 0) in the world)."""
+def _scene_file(tmp_path, yaw: float) -> str:
     path = tmp_path / f"yaw_{yaw:g}.toml"
-    path.write_text(f"""name = "yawed"
-[[berries]]
-name = "b"
-mass = 0.011
-radius = 0.0135
-twig_length = 0.03
-hinge_x = 0.0
-hinge_damping = 2.0e-5
-[excitation]
-kind = "none"
-orientation = [0.0, 0.0, {yaw!r}]
-""")
+    path.write_text(one_planar_berry(yaw))
     return str(path)
 
 
@@ -394,7 +382,7 @@ def test_a_planar_scene_turned_about_z_follows_a_turn_about_its_y_axis(ros, tmp_
 
     runs = []
     for yaw in (0.0, 0.5):
-        n = node(mode="lockstep", scene=_one_planar_berry(tmp_path, yaw), pose_filter_hz=200.0)
+        n = node(mode="lockstep", scene=_scene_file(tmp_path, yaw), pose_filter_hz=200.0)
         start = Rotation.from_euler("z", yaw)
         axis = start.apply([0.0, 1.0, 0.0])
         turned, angles = 0.0, []
