@@ -65,9 +65,10 @@ def test_cross_check_package_is_valid_and_reproduces_its_reference(tmp_path, fmi
 
 def test_a_planar_scene_that_turns_about_its_yawed_axis_reproduces_its_reference(tmp_path):
     """A planar scene started with a yaw of 0.5 rad turns 0.3 rad about its y axis n = (−sin 0.5, cos 0.5, 0) and
-    comes to rest. The package's ω was summed per component, so at rest it was (1.9e-16, −1.4e-16, 0) rad/s, all
-    across n, and its own FMU refused it at t = 0.5 s as a turn about another axis: fmpy's simulate_fmu failed with
-    doStep Error. Now the FMU follows the package's input to its reference."""
+    comes to rest. The package's ω is summed per component, as a master's integrator sums it, so at rest it is
+    (1.9e-16, −1.4e-16, 0) rad/s, all across n: its own FMU refused it at t = 0.5 s as a turn about another axis, and
+    fmpy's simulate_fmu failed with doStep Error. Below ACROSS_FLOOR it is no turn, and the FMU follows the package's
+    input to its reference."""
     import math
 
     turn = f"[{-0.3 * math.sin(0.5)!r}, {0.3 * math.cos(0.5)!r}, 0.0]"

@@ -56,22 +56,14 @@ PHASES = ("instantiated", "initialization", "step", "terminated")
 CONTACT_PARAMETERS = ("contact_law", "contact_stiffness", "contact_damping", "restitution")
 
 
-def held_inputs(excitation, t, axis=None) -> np.ndarray:
+def held_inputs(excitation, t) -> np.ndarray:
     """The inputs (INPUTS, one row per time of t) that give the FMU `excitation` held from each time of t to the
     next: (a, α) sampled at t, and ω at t as that held α leaves it (world frame, so ω(t_k+1) = ω(t_k) + α_k Δt
-    exactly, from the excitation's initial ω). A master that feeds them reproduces a run of the held excitation.
-    axis: a planar scene's plane normal (Scene.plane_normal), the one axis its rachis turns about: ω is summed
-    along it as one number, since the rounding of three sums, all across the axis where a turn comes back to rest
-    (2e-16 rad/s), is a turn the FMU refuses."""
+    exactly, from the excitation's initial ω). A master that feeds them reproduces a run of the held excitation."""
     t = np.asarray(t, dtype=float)
     a = accel(excitation, t)
-    w0 = np.asarray(excitation.angular_velocity, dtype=float)
-    if axis is None:
-        turned = np.cumsum(a[:-1, 3:] * np.diff(t)[:, None], axis=0)
-        return np.column_stack([a, w0 + np.vstack([np.zeros((1, 3)), turned])])
-    n = np.asarray(axis, dtype=float)
-    turned = np.cumsum(a[:-1, 3:] @ n * np.diff(t))
-    return np.column_stack([a, np.outer(w0 @ n + np.concatenate([[0.0], turned]), n)])
+    turned = np.cumsum(a[:-1, 3:] * np.diff(t)[:, None], axis=0)
+    return np.column_stack([a, np.asarray(excitation.angular_velocity) + np.vstack([np.zeros((1, 3)), turned])])
 
 
 class FmuCore:

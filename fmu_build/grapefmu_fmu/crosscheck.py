@@ -38,7 +38,7 @@ def write_cross_check(scene_path: str | Path, out: str | Path, fmi: int = 2) -> 
 
     sv = scene.solver
     t = np.round(np.arange(0.0, sv.t_end + 1e-12, SAMPLE), 12)
-    u = held_inputs(scene.excitation, t, scene.plane_normal)
+    u = held_inputs(scene.excitation, t)
     steps = np.column_stack([t, u])
     na = len(ACCEL_INPUTS)
     # each acceleration holds until the next sample: repeat the time at every change (FMI cross-check rules)
