@@ -324,6 +324,19 @@ def test_islands_merged_twice_in_one_window_keep_what_they_recorded(monkeypatch)
     assert np.abs(run.y - whole.y).max() < 1e-6
 
 
+def test_islands_stop_at_the_step_limit_as_one_step_size_does():
+    """`solver.max_steps` bounds a run's accepted steps; in islands, the steps of each berry's islands since the start.
+    Every island ends a step at each window's end, so over 1 s (50 windows) each berry's islands take at least 50: a
+    run one step size cannot finish within 40 steps stops in islands too, with the same SolverError naming the limit.
+    Each island's window was once allowed 40 steps of its own, and the run finished."""
+    doc = cluster_scene(ClusterSpec(berries=20, seed=7))
+    for islands in (False, True):
+        sc = scene_from_dict({**doc, "solver": {"t_end": 1.0, "rtol": 1e-8, "max_steps": 40, "islands": islands}},
+                             Path.cwd())
+        with pytest.raises(SolverError, match=r"the step limit was reached \(40 steps; "):
+            simulate(sc)
+
+
 def test_a_scene_asks_for_islands():
     """`solver.islands = true` runs `simulate` in multirate islands (the Run of Islands(scene).run(), one Solver's
     impacts); a method or fixed step islands cannot take is refused at load, naming the key; a caller's paper

@@ -71,11 +71,12 @@ class _Segment:
     impacts it recorded, which the run assembles last (its samples go into the run's arrays at each window's start
     and, with its contact changes, when it retires: handover.flush, retire)."""
 
-    __slots__ = ("members", "pairs", "system", "impacts", "window")
+    __slots__ = ("members", "pairs", "system", "impacts", "window", "base")
 
-    def __init__(self, members, pairs, system):
+    def __init__(self, members, pairs, system, base):
         self.members, self.pairs = members, pairs
         self.system = system
+        self.base = base  # the most steps any of its berries' islands took before it formed (the step limit's)
         self.impacts: list[np.ndarray] = []   # finished impacts of the windows kept
         self.window: list[np.ndarray] = []    # ... of the window in progress
 
@@ -98,6 +99,7 @@ class _Batch:
     def _index(self) -> None:
         k = len(self.segs)
         self.saved = np.zeros(k, dtype=st.CURSOR)
+        self.base = np.array([seg.base for seg in self.segs], dtype=np.int64)
         self.status = np.zeros(k, dtype=np.int64)
         self.n_impacts = np.zeros(k, dtype=np.int64)
         ses.labels(self.sessions, self.label)
@@ -191,6 +193,7 @@ class Islands:
         self.segments: list[_Segment] = []
         self.changes: list[np.ndarray] = []  # the retired islands' contact changes, in the order they retired
         self.formed = self.rollbacks = self.berry_steps = 0
+        self.done = np.zeros(self.n, dtype=np.int64)  # each berry's steps since the start, its islands' (max_steps)
 
     def _retire(self, segs: list[_Segment], slots: np.ndarray, sessions) -> None:
         """Put the state of these segments (at slots of the sessions list) into the scene's and their samples into
@@ -200,6 +203,7 @@ class Islands:
         self.changes.append(changes)
         for seg, n_steps in zip(segs, steps.tolist()):
             self.berry_steps += len(seg.members) * n_steps
+            self.done[seg.members] = seg.base + n_steps
             seg.impacts += seg.window
             seg.window = []
             self.segments.append(seg)
@@ -236,7 +240,8 @@ class Islands:
                     del self.free[shape]
             else:
                 system = _System(self.whole, *shape, self.per + 1)
-            segs.append(_Segment(members[m[k]:m[k + 1]], pairs[p[k]:p[k + 1]], system))
+            mine = members[m[k]:m[k + 1]]
+            segs.append(_Segment(mine, pairs[p[k]:p[k + 1]], system, int(self.done[mine].max())))
         self.formed += len(segs)
         M, G, local, offsets = self.whole.M, self.G, self.local, self.scene_offsets
         t0, dt, t_end = self.t0, self.dt, self.t_end
@@ -254,8 +259,8 @@ class Islands:
         k = 0
         while True:
             batch.n_impacts[:] = 0
-            k = ses.windows(batch.sessions, k, t_w, self.max_steps, fresh, batch.saved, batch.status, batch.n_impacts,
-                            self.drifted, self.engaged)
+            k = ses.windows(batch.sessions, k, t_w, self.max_steps, batch.base, fresh, batch.saved, batch.status,
+                            batch.n_impacts, self.drifted, self.engaged)
             for m in np.flatnonzero(batch.n_impacts):
                 seg = batch.segs[m]
                 seg.window.append(ses.take_impacts(seg.system.session))

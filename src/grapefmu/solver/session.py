@@ -288,10 +288,11 @@ def resume(s, t_target, max_steps):
 
 
 @jit
-def windows(sessions, first, t_target, max_steps, fresh, saved, status, n_impacts, drifted, engaged):
+def windows(sessions, first, t_target, max_steps, base, fresh, saved, status, n_impacts, drifted, engaged):
     """Islands' windows (solver/islands.py) in one call, from island `first` on. Each island, if fresh[k], saves its
     state (memory -> backup) and its recorder's cursor (into saved[k]) and anchors its path (drift.anchor); it
-    integrates towards t_target, then puts its berries' drift into drifted and whether its pairs are engaged (in
+    integrates towards t_target, its berries' steps since the run's start (base[k], taken before it formed, and its
+    own) held to max_steps, then puts its berries' drift into drifted and whether its pairs are engaged (in
     contact or in a Zeno window) into engaged (scene indices, through its buffers' members and pairs). status[k] is
     integrate's status, n_impacts[k] the finished impacts in its recorder; stops at the first island whose status is
     not DONE and returns its index (len(sessions) when all are done)."""
@@ -304,7 +305,8 @@ def windows(sessions, first, t_target, max_steps, fresh, saved, status, n_impact
             sv.n_impacts, sv.n_changes = cur.n_impacts, cur.n_changes
             s.backup[:] = s.memory
             anchor(S.physical.y, S.integrator.f, S.physical.t[0], s.model, s.buffers.path, s.buffers.drifted)
-        st = integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, s.buffers, t_target, max_steps)
+        left = max_steps - base[k] - S.book.counters[0].steps
+        st = integrate(s.model, s.excitation, s.tableau, S, s.config, s.scratch, s.buffers, t_target, left)
         status[k] = st
         n_impacts[k] = s.scratch.cursor[0].n_impacts
         if st != DONE:
