@@ -337,6 +337,19 @@ def test_islands_stop_at_the_step_limit_as_one_step_size_does():
             simulate(sc)
 
 
+def test_islands_refuse_a_bad_end_or_output_interval_as_one_solver_does():
+    """Islands(scene).run takes Solver.run's t_end and output_interval and refuses what it refuses, with its words (a
+    NaN end was a ValueError from numpy, an interval of 0 a ZeroDivisionError)."""
+    sc = scene_from_dict({**row_scene(RowSpec(berries=3)), "solver": {"t_end": 0.2, "islands": True}}, Path.cwd())
+    for t_end, dt in ((math.nan, None), (-1.0, None), ("x", None), (1e9, None), (None, 0.0), (None, math.nan),
+                      (None, -0.01)):
+        with pytest.raises(SolverError) as one:
+            Solver(sc).run(t_end, dt)
+        with pytest.raises(SolverError) as isl:
+            Islands(sc).run(t_end, dt)
+        assert str(isl.value) == str(one.value)
+
+
 def test_a_scene_asks_for_islands():
     """`solver.islands = true` runs `simulate` in multirate islands (the Run of Islands(scene).run(), one Solver's
     impacts); a method or fixed step islands cannot take is refused at load, naming the key; a caller's paper

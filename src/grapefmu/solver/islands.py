@@ -354,9 +354,8 @@ class Islands:
             progress: Callable[[float, float], None] | None = None) -> Run:
         """The scene from its start to t_end (Solver.run's arguments), as one Run. Its stats count every island's
         steps and evaluations, and how many islands formed and were rolled back."""
-        s = self.scene.solver
-        t_end = s.t_end if t_end is None else float(t_end)
-        self.dt = dt = s.output_interval if output_interval is None else float(output_interval)
+        t_end, dt = self.whole.run_span(t_end, output_interval)  # refused as Solver.run refuses them
+        self.dt = dt
         self.t0 = t0 = self.whole.t
         self.t_end = t_end
         # the run's step limit, as one Solver's: the stiffest hinge's island alone takes at least its steps

@@ -373,6 +373,19 @@ class Solver:
             del self._closed[kept:]
             self._fail(status)
 
+    def run_span(self, t_end: float | None, output_interval: float | None) -> tuple[float, float]:
+        """`run`'s end and output interval (the scene's where None), each refused with a SolverError that names it
+        where it is out of range, or where the samples they make would not fit (solver/budget.py)."""
+        s = self.scene.solver
+        refuse_out_of_range(output_interval=output_interval)
+        dt_out = s.output_interval if output_interval is None else float(output_interval)
+        end = _finite(s.t_end if t_end is None else t_end)
+        if end is None or not 0.0 <= end - self.t <= bound(SolverSettings, "t_end").hi:
+            raise SolverError(f"t_end: expected a time from the solver's t = {self.t:.9g} s to "
+                              f"{bound(SolverSettings, 't_end').hi:g} s after it, got {t_end!r}")
+        check_samples(self.model, end - self.t, dt_out, "t_end", "output_interval")
+        return end, dt_out
+
     def _steps_since_save(self) -> int:
         """Accepted steps since the state was last saved (a run's or a step's start): the count now less the one in
         the backup, read at the counters' place in it (for the step limit, after the loop returned early)."""
@@ -436,15 +449,7 @@ class Solver:
             progress: Callable[[float, float], None] | None = None) -> Run:
         """Integrate from the current time to t_end, recording samples every output_interval. On failure
         the state is left as it was before the call."""
-        s = self.scene.solver
-        refuse_out_of_range(output_interval=output_interval)
-        dt_out = s.output_interval if output_interval is None else float(output_interval)
-        end = _finite(s.t_end if t_end is None else t_end)
-        if end is None or not 0.0 <= end - self.t <= bound(SolverSettings, "t_end").hi:
-            raise SolverError(f"t_end: expected a time from the solver's t = {self.t:.9g} s to "
-                              f"{bound(SolverSettings, 't_end').hi:g} s after it, got {t_end!r}")
-        t_end = end
-        check_samples(self.model, t_end - self.t, dt_out, "t_end", "output_interval")
+        t_end, dt_out = self.run_span(t_end, output_interval)
         self.refuse_stiff(t_end - self.t)
         self._save()
         t_start = self.t
