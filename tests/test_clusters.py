@@ -390,6 +390,24 @@ def test_auto_islands_from_a_number_of_berries(monkeypatch):
     np.testing.assert_array_equal(one.y, Solver(sc).run().y)
 
 
+def test_auto_islands_take_the_callers_method_and_fixed_step(monkeypatch):
+    """A scene set to the paper method or a fixed step, run by `simulate` with the event method or adaptive steps the
+    caller asks for: a group that "auto" runs in islands takes the caller's settings, as one step size does, and has
+    its impacts (it was refused, the islands reading the scene's method and fixed step)."""
+    monkeypatch.setattr(model_module, "ISLANDS_FROM", 12)
+    doc = cluster_scene(ClusterSpec(berries=12, seed=1))
+    for own, given in (({"method": "paper"}, {"method": "event"}), ({"fixed_step": 1e-3}, {"fixed_step": 0.0})):
+        sc = scene_from_dict({**doc, "solver": {"t_end": 0.3, "rtol": 1e-9, "atol": 1e-12, **own}}, Path.cwd())
+        run = simulate(sc, **given)
+        one = simulate(replace(sc, solver=replace(sc.solver, islands=False)), **given)
+        assert run.stats["islands_formed"] > 5 and "islands_formed" not in one.stats
+        assert run.stats["method"] == one.stats["method"] == "event" and run.stats["fixed_step"] == 0.0
+        assert len(run.impacts) == len(one.impacts) > 5
+        np.testing.assert_array_equal(run.impacts.pair, one.impacts.pair)
+        np.testing.assert_allclose(run.impacts.onset, one.impacts.onset, atol=1e-8)
+        assert np.abs(run.angles - one.angles).max() < 1e-7
+
+
 def test_islands_record_a_stepped_rachis_as_one_solver_does():
     """A staircase acceleration (zero-order hold) with steps on the output grid: a sample on a step is recorded by
     the step that ends there, on the stair before it, whether the grid's time lands on the breakpoint or an ulp past

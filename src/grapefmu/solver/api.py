@@ -53,7 +53,8 @@ def simulate(scene: Scene, t_end: float | None = None, *, method: str | None = N
 
     def one(sc: Scene, done: float, share: float) -> Run:
         if runs_in_islands(scene.solver.islands, sc.model.n_berries, method, step):
-            return Islands(sc, rtol=rtol, atol=atol).run(t_end, output_interval, hook(done, share))
+            return Islands(sc, rtol=rtol, atol=atol, method=method, fixed_step=fixed_step).run(
+                t_end, output_interval, hook(done, share))
         return Solver(sc, method=method, rtol=rtol, atol=atol, fixed_step=fixed_step).run(t_end, output_interval,
                                                                                           hook(done, share))
 

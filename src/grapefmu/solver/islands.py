@@ -139,16 +139,20 @@ class _Batch:
 
 
 class Islands:
-    """A whole run of an event-located scene in multirate islands (`run`); `Solver` arguments as in Solver."""
+    """A whole run of an event-located scene in multirate islands (`run`); `Solver` arguments as in Solver (a method
+    and fixed step given override the scene's, as `simulate`'s do)."""
 
     def __init__(self, scene: Scene, *, rtol: float | None = None, atol: float | None = None,
-                 window: float = WINDOW, max_steps: int | None = None):
-        why = islands_refusal(scene.solver.method, scene.solver.fixed_step)
+                 window: float = WINDOW, max_steps: int | None = None, method: str | None = None,
+                 fixed_step: float | None = None):
+        why = islands_refusal(method or scene.solver.method,
+                              scene.solver.fixed_step if fixed_step is None else fixed_step)
         if why:
             raise SolverError(f"solver: {why}")
         if not window > 0.0:
             raise SolverError(f"window: must be > 0 s, got {window!r}")
-        self.whole = Solver(scene, rtol=rtol, atol=atol, max_steps=max_steps)  # the start, the settings
+        # the start, the settings
+        self.whole = Solver(scene, method=method, rtol=rtol, atol=atol, fixed_step=fixed_step, max_steps=max_steps)
         self.scene, self.window, self.max_steps = scene, window, self.whole.max_steps
         m = scene.model
         self.n = m.n_berries
