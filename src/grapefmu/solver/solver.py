@@ -55,6 +55,10 @@ DOP853_TOLERANCE = 1 / 3
 #: face's step (advance of a driven Solver: an FMU's doStep, a ROS node's tick), which a master or an executor waits
 #: for, so it ends in bounded time (well under a second) with an error a master can act on
 RUN_MAX_STEPS, FACE_MAX_STEPS = 10_000_000, 100_000
+#: s: the longest span a run or an advance takes from the solver's time (solver.t_end's bound). A longer step is no
+#: step of a co-simulation: a wall-clock stamp (1.7e9 s) sent to a lockstep node was refused as a hinge too stiff for
+#: 2.5e8 solver steps
+LONGEST_STEP = bound(SolverSettings, "t_end").hi
 #: |cos s| below which a failed run blames a spherical berry's swing for its shrinking steps: the swing–tilt chart
 #: is singular at cos s = 0, and one approaching it stalls the run (|cos s| = 1.2e-3 at steps of 0.6 µs and 1.5e-5
 #: at 80 ps, in a pass that never ended)
@@ -380,9 +384,9 @@ class Solver:
         refuse_out_of_range(output_interval=output_interval)
         dt_out = s.output_interval if output_interval is None else float(output_interval)
         end = _finite(s.t_end if t_end is None else t_end)
-        if end is None or not 0.0 <= end - self.t <= bound(SolverSettings, "t_end").hi:
-            raise SolverError(f"t_end: expected a time from the solver's t = {self.t:.9g} s to "
-                              f"{bound(SolverSettings, 't_end').hi:g} s after it, got {t_end!r}")
+        if end is None or not 0.0 <= end - self.t <= LONGEST_STEP:
+            raise SolverError(f"t_end: expected a time from the solver's t = {self.t:.9g} s to {LONGEST_STEP:g} s "
+                              f"after it, got {t_end!r}")
         check_samples(self.model, end - self.t, dt_out, "t_end", "output_interval")
         return end, dt_out
 
@@ -575,11 +579,6 @@ def _finite(x) -> float | None:
     except OverflowError:
         return None
     return v if math.isfinite(v) else None
-
-
-#: s: the longest step advance takes, the longest run (solver.t_end). A longer one is no step of a co-simulation: a
-#: wall-clock stamp (1.7e9 s) sent to a lockstep node was refused as a hinge too stiff for 2.5e8 steps
-LONGEST_STEP = bound(SolverSettings, "t_end").hi
 
 
 def _step_size(dt) -> float:
