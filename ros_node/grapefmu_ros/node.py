@@ -106,6 +106,13 @@ def _range(lo, hi):
     return [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
 
 
+def _planar_why(axis, frame: str, got: str) -> str:
+    """Why a planar scene rejects a turn about another axis than `axis` (its y axis, in `frame`): `got` says what."""
+    return (f"the scene has planar berries, which swing in the rachis' x–z plane: the rachis may turn only about its "
+            f"y axis ({', '.join(f'{c:.6g}' for c in axis)} in {frame}); {got} (a scene of spherical berries follows "
+            "any rotation)")
+
+
 class SimulatorNode(Node):
     def __init__(self, **kwargs):
         kwargs.setdefault("namespace", msgs.NAMESPACE)  # `-r __ns:=/other` moves everything, frames included
@@ -318,9 +325,7 @@ class SimulatorNode(Node):
         elif math.hypot(*w) > MAX_ANGULAR_VELOCITY:
             why = f"angular velocity |ω| = {math.hypot(*w):.6g} rad/s above {MAX_ANGULAR_VELOCITY:g}"
         elif axis is not None and (any(a[3:]) or any(w)) and (off_axis(a[3:], axis) or off_axis(w, axis)):
-            why = (f"the scene has planar berries, which swing in the rachis' x–z plane: the rachis may turn only "
-                   f"about its y axis ({', '.join(f'{c:.6g}' for c in axis)} in {frame}); got α = {tuple(a[3:])} "
-                   f"rad/s², ω = {tuple(w)} rad/s (a scene of spherical berries follows any rotation)")
+            why = _planar_why(axis, frame, f"got α = {tuple(a[3:])} rad/s², ω = {tuple(w)} rad/s")
         else:
             return True
         self._reject(what, why)
@@ -454,10 +459,7 @@ class SimulatorNode(Node):
             turn = next((w for w in (tuple(r[3:].tolist()) for r in rates) if off_axis(w, n)), None) if (
                 n is not None and order == 2) else None  # a twist's ω is judged as sent (_valid)
             if turn is not None:
-                self._reject(what, f"the scene has planar berries, which swing in the rachis' x–z plane: the rachis "
-                                   f"may turn only about its y axis ({', '.join(f'{c:.6g}' for c in n)} in world); "
-                                   f"the poses turn at ω = {turn} rad/s (a scene of spherical berries follows any "
-                                   "rotation)")
+                self._reject(what, _planar_why(n, "world", f"the poses turn at ω = {turn} rad/s"))
                 return False
             raw = rates[0] if order == 1 else (rates[1] - rates[0]) / (0.5 * (times[2] - times[0]))
             alpha = 1.0 - math.exp(-2 * math.pi * self.get_parameter("pose_filter_hz").value * (times[-1] - times[-2]))

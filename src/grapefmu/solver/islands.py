@@ -151,8 +151,8 @@ class Islands:
             raise SolverError(f"solver: {why}")
         if not window > 0.0:
             raise SolverError(f"window: must be > 0 s, got {window!r}")
-        # the start, the settings
-        self.whole = Solver(scene, method=method, rtol=rtol, atol=atol, fixed_step=fixed_step, max_steps=max_steps)
+        self.whole = Solver(scene, method=method, rtol=rtol, atol=atol, fixed_step=fixed_step,
+                            max_steps=max_steps)  # the start, the settings
         self.scene, self.window, self.max_steps = scene, window, self.whole.max_steps
         m = scene.model
         self.n = m.n_berries
