@@ -301,6 +301,16 @@ def test_islands_keep_the_crate_contacts():
     np.testing.assert_array_equal(run.accel, whole.accel)
 
 
+@pytest.mark.parametrize("window", [1e10, math.inf])
+def test_islands_window_beyond_the_run_is_the_run(window):
+    """A window longer than the run is one window of the whole run (it sized a recorder for the window's samples:
+    MemoryError at 1e10 s, OverflowError at inf), and runs the same steps as a window of exactly the run."""
+    sc = cluster(8, t_end=0.1, rtol=1e-7)
+    run, whole = Islands(sc, window=window).run(), Islands(sc, window=0.1).run()
+    np.testing.assert_array_equal(run.y, whole.y)
+    assert run.stats["steps"] == whole.stats["steps"] and np.isfinite(run.y).all()
+
+
 def test_islands_merged_twice_in_one_window_keep_what_they_recorded(monkeypatch):
     """A row struck at one end: with every berry its own island from the start and islands never regrouped (only the
     rollbacks merge them), the struck berry's island merges with its neighbour's, and that island with the next in

@@ -365,7 +365,7 @@ class Islands:
         # the run's step limit, as one Solver's: the stiffest hinge's island alone takes at least its steps
         self.whole.refuse_stiff(t_end - t0)
         self.n_samples = n = grid_last(t0, t_end, dt, True) + 1
-        self.per = per = max(1, int(round(self.window / dt)))
+        self.per = per = max(1, int(round(min(self.window / dt, n - 1))))  # a window beyond the run is the run
         self._start()
         wall_start = time.perf_counter()
         self.lin, self.reach = np.zeros((K, self.n, 3)), np.zeros((self.n, 2))
