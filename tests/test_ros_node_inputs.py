@@ -408,3 +408,66 @@ def test_a_planar_scene_turned_about_z_follows_a_turn_about_its_y_axis(ros, tmp_
             n.destroy_node()
     assert np.abs(runs[0]).max() > 0.01  # the turn swings the berry
     np.testing.assert_allclose(runs[1], runs[0], rtol=0, atol=1e-9)
+
+
+def test_real_time_input_times_out_to_zero_acceleration(ros, tmp_path):
+    """A controller that falls silent: its last acceleration used to act for ever (the rachis sped on without
+    bound). After input_timeout on the node's clock the held acceleration drops to zero at the simulated time the
+    timeout ran out, and the rachis coasts: 2 m/s² accepted at clock 1000 s then silence, at 1001 s it has moved
+    ½·2·0.5² + (2·0.5)·0.5 = 0.75 m at 1 m/s, where without the timeout it has moved 1 m. The states are a
+    Solver.advance loop's over the same intervals bit for bit, and replay --check reproduces the recording."""
+    from grapefmu import Solver
+    moved = {}
+    for timeout in (0.5, 0.0):
+        rec = tmp_path / f"timeout{timeout}.mcap"
+        n = node(mode="realtime", use_sim_time=True, input_timeout=timeout, record=str(rec))
+        diags = []
+        emit = n.emit
+        n.emit = lambda topic, m, ns: diags.append(m) if topic == "/diagnostics" else emit(topic, m, ns)
+        clock = n.get_clock()
+        try:
+            clock.set_ros_time_override(Time(seconds=1000.0))
+            n.on_tick()
+            accel(n, 1000.0, 2.0)
+            for t in (1000.2, 1001.0):
+                clock.set_ros_time_override(Time(seconds=t))
+                n.on_tick()
+            assert n.solver.t == 1.0
+            snap = n.solver.snapshot()
+            moved[timeout] = float(snap.base_displacement[0, 0])
+            n.on_diagnostics()
+            values = {kv.key: kv.value for kv in diags[-1].status[0].values}
+            if timeout:
+                assert n.accel == (0.0,) * 6 and n.timeouts == 1 and values["inputs_timed_out"] == "1"
+                assert diags[-1].status[0].level == 1 and "input timed out" in diags[-1].status[0].message
+                s = Solver(n.scene, driven=True)
+                for dt, a in ((0.2, 2.0), (0.3, 2.0), (0.5, 0.0)):
+                    s.advance(dt, (a, 0.0, 0.0, 0.0, 0.0, 0.0))
+                np.testing.assert_array_equal(n.solver.angles, s.angles)
+                accel(n, 1001.0, 1.0)  # an input re-arms it
+                assert n.accel[0] == 1.0 and n.timeouts == 1
+            else:
+                assert n.accel[0] == 2.0 and n.timeouts == 0 and values["inputs_timed_out"] == "0"
+        finally:
+            n.close()
+            n.destroy_node()
+        assert check(rec).max_deviation == 0.0
+    assert moved[0.5] == pytest.approx(0.75, rel=1e-9) and moved[0.0] == pytest.approx(1.0, rel=1e-9)
+
+
+def test_poses_after_a_timeout_are_not_differenced_against_those_before(ros):
+    """A gripper at rest whose poses stop for 2 s and come back 0.5 m away (moved while its publisher was down):
+    the second difference across the silence was a spurious acceleration; after the timeout the poses start afresh
+    and the rachis, at rest, stays so."""
+    n = node(mode="realtime", use_sim_time=True, input_timeout=0.5)
+    clock = n.get_clock()
+    try:
+        for t, z in [(1000.0, 0.0), (1000.01, 0.0), (1000.02, 0.0), (1002.0, 0.5), (1002.01, 0.5), (1002.02, 0.5)]:
+            clock.set_ros_time_override(Time(seconds=t))
+            n.on_tick()
+            pose(n, t, z)
+        assert n.timeouts == 1 and n.rejected == 0 and n.accel == (0.0,) * 6
+        np.testing.assert_array_equal(n._motion_acc, np.zeros(6))
+    finally:
+        n.close()
+        n.destroy_node()

@@ -49,6 +49,9 @@ PARAMETERS = [
     ("mode", "realtime", "realtime (wall-clock locked timer) or lockstep (advance to each input stamp)", None, True),
     ("rate_hz", 1000.0, "Real-time mode: simulation and joint_states rate, Hz", (1, 10000), True),
     ("real_time_factor", 1.0, "Simulated seconds per wall second in real-time mode", (0.01, 100), False),
+    ("input_timeout", 0.5, "Real-time mode: after this long without an accepted input (s, the node's clock) the "
+     "held acceleration drops to zero, so the rachis coasts on at its velocity, and motion inputs are differenced "
+     "afresh (0: hold the last input for ever)", (0, 3600), False),
     ("max_accel", MAX_ACCEL, "Inputs whose linear acceleration exceeds this magnitude (m/s²) are rejected (at most "
      "the solver's own bound)", (0, MAX_ACCEL), False),
     ("max_angular_accel", MAX_ANGULAR_ACCEL, "Inputs whose angular acceleration exceeds this magnitude (rad/s²) are "
@@ -172,6 +175,8 @@ class SimulatorNode(Node):
         self.deepest = None  # (pair, δ, bound, t) pressed deepest past its bound since the last diagnostics
         self.deepest_of_radius = 0.0  # the deepest overlap over its pair's radius since the last diagnostics
         self.real_time_factor = gp("real_time_factor")
+        self.input_clock: int | None = None  # ns, the node's clock when the input held was accepted (real time)
+        self.timeouts = self._timeouts_seen = 0  # times input_timeout zeroed the held acceleration; of them, said
         self.add_post_set_parameters_callback(self._on_parameters_set)
         self._reset_sim()
         if self.mode == "realtime":
@@ -191,6 +196,8 @@ class SimulatorNode(Node):
         before the first /clock) is not yet running: the first tick that reads it running restarts from there."""
         self.clock0, self.sim0 = self.get_clock().now().nanoseconds, self.solver.t
         self.last_clock = self.clock0
+        if self.input_clock is not None:  # the timeout counts the clock running from here (a resume, a jump back)
+            self.input_clock = self.clock0
         self.origin = 0 if self.mode == "lockstep" else self.clock0 - to_ns(self.solver.t)
 
     def _sim_target(self, clock_ns: int) -> float:
@@ -222,6 +229,7 @@ class SimulatorNode(Node):
         self._last = {}  # rate parameter -> simulated time its topic was last published
         self._motion = {2: [], 1: []}  # the last poses (order 2) and velocities (order 1) received
         self._motion_acc = np.zeros(6)
+        self.input_clock = None
         stamp = self._stamp(self.solver.t)
         for topic, m in msgs.tf_static(self.scene.model, stamp, self.prefix):
             self.emit(topic, m, stamp)
@@ -375,6 +383,8 @@ class SimulatorNode(Node):
             else:
                 self.publish_state()  # an input at the current time still gets its answer
         self.last_stamp = t_in
+        if self.mode == "realtime":
+            self.input_clock = self.get_clock().now().nanoseconds
         if frame == "rachis":
             turn = Rotation.from_quat(self.solver.snapshot().base_orientation[0])
             a = (*turn.apply(a[:3]), *turn.apply(a[3:]))
@@ -494,8 +504,24 @@ class SimulatorNode(Node):
                 throttle_duration_sec=1.0)
             self._restart_clock()
         self.last_clock = clock
+        timeout = to_ns(self.get_parameter("input_timeout").value)
+        if self.input_clock is not None and timeout > 0 and clock - self.input_clock > timeout:
+            self._time_out(self.input_clock + timeout)
         self.advance(self._sim_target(clock) - self.solver.t)
         self.tick_costs.append(time.monotonic() - now)
+
+    def _time_out(self, clock_ns: int) -> None:
+        """No input for input_timeout: integrate up to the simulated time of clock_ns (when it ran out) with the input
+        held, then hold zero acceleration and forget the motion inputs (a pose after the silence is not differenced
+        against one before it)."""
+        self.advance(self._sim_target(clock_ns) - self.solver.t)
+        self.accel, self.input_clock = (0.0,) * 6, None
+        self._motion, self._motion_acc = {2: [], 1: []}, np.zeros(6)
+        self.timeouts += 1
+        self.get_logger().warning(
+            f"no input for input_timeout = {self.get_parameter('input_timeout').value:g} s: zero acceleration held "
+            f"from simulated t = {self.solver.t:.6f} s (the rachis coasts on at its velocity)",
+            throttle_duration_sec=5.0)
 
     # --- services -------------------------------------------------------------------------------
     def on_reset(self, _req, resp):
@@ -527,7 +553,7 @@ class SimulatorNode(Node):
         values = {
             "sim_time_s": f"{t:.6f}", "real_time_factor": f"{(t - sim_prev) / max(now - wall_prev, 1e-9):.4f}",
             "cpu_percent": f"{100 * (cpu - cpu_prev) / max(now - wall_prev, 1e-9):.1f}", "overruns": self.overruns,
-            "clock_jumps_back": self.clock_jumps,
+            "clock_jumps_back": self.clock_jumps, "inputs_timed_out": self.timeouts,
             "rejected_inputs": self.rejected, "refused_steps": self.failures, **summary,
             **({} if math.isnan(self.orientation_offset) else
                {"gripper_orientation_offset_rad": f"{self.orientation_offset:.6f}"}),
@@ -538,12 +564,14 @@ class SimulatorNode(Node):
                 zip(("p50", "p99", "max"), np.percentile(self.tick_costs, [50, 99, 100]))} if self.tick_costs else {}),
         }
         jumped, self._jumps_seen = self.clock_jumps > self._jumps_seen, self.clock_jumps
-        warn = detach or bruising or self.rejected or self.failures or deep or jumped
+        timed_out, self._timeouts_seen = self.timeouts > self._timeouts_seen, self.timeouts
+        warn = detach or bruising or self.rejected or self.failures or deep or jumped or timed_out
         level = 2 if self.failures else (1 if warn else 0)
         msg = ("steps refused (the log says why)" if self.failures else
                overlap_words(self.scene.model, *deep) if deep else "detachment risk" if detach else
                "bruising impacts" if bruising else "inputs rejected" if self.rejected else
-               "the clock went back (the log says from when to when)" if jumped else "ok")
+               "the clock went back (the log says from when to when)" if jumped else
+               "input timed out: zero acceleration held (input_timeout)" if timed_out else "ok")
         self.emit(*msgs.diagnostics(self._stamp(t), level, msg, values), self._stamp(t))
 
     def close(self):
