@@ -91,7 +91,7 @@ def draw(r: random.Random) -> dict:
 
 def kind(e: SolverError) -> str:
     text = str(e)
-    if "chart is singular" in text:
+    if "at the pole of its swing–tilt chart" in text:
         return "stopped: a spherical berry at its chart's pole"
     if "too stiff" in text:
         return "refused before a step: a hinge too stiff for the step limit (solver/stiffness.py)"

@@ -170,7 +170,8 @@ def test_a_swing_over_the_spherical_charts_pole(tilt_rate):
     """A spherical berry with no forces swinging at ṡ = 10 rad/s with a little tilt momentum p_t = m l² cos² s ṫ:
     energy and p_t hold, so it turns back where cos² s = p_t² / (2 m l² E), cos s_min = ṫ₀/ṡ₀ (docs/model.md §1).
     With ṫ₀ = 1e-3 rad/s it turns at cos s = 1e-4 and the run goes on, never nearer the pole than that; with 1e-9
-    it would turn at 1e-10, and the chart cannot follow it: the run stops where s reaches 90° (t = π/20 s) with an
+    it would turn at 1e-10, and the chart cannot follow it: the run stops at the step floor (this berry) or once
+    |cos s| has stayed below loop.POLE_STOP (1e-4, 1e-5 s before s reaches 90° at t = π/20 s) for 1024 steps, with an
     error naming the berry, not at the step limit."""
     import re
     from dataclasses import replace
@@ -190,19 +191,21 @@ def test_a_swing_over_the_spherical_charts_pole(tilt_rate):
         return
     in_islands = replace(sc, solver=replace(sc.solver, islands=True))
     for run in (s.run, lambda: simulate(in_islands)):  # one step size, and in islands
-        with pytest.raises(SolverError, match="spherical berry 'b' swung to 90.0000°, where its swing–tilt chart") as e:
+        with pytest.raises(SolverError, match=r"spherical berry 'b' swung to (89\.99\d\d|90\.0000)°, at the pole of") as e:
             run()
-        assert float(re.match(r"integration stopped at t = ([0-9.]+) s", str(e.value))[1]) == pytest.approx(
-            math.pi / 2 / w0, abs=1e-6)
+        t = float(re.match(r"integration stopped at t = ([0-9.]+) s", str(e.value))[1])
+        assert math.pi / 2 / w0 - 1.01e-5 < t < math.pi / 2 / w0 + 1e-9  # t is printed to 9 digits
     assert s.t == 0.0
 
 
-def test_a_spherical_berry_carried_into_its_charts_pole_stops_at_the_step_floor():
+def test_a_spherical_berry_carried_into_its_charts_pole_stops_near_it():
     """Swung at the documented limits (80°, −1000 rad/s) on a damped hinge: the damping's torque on the tilt stays as
     the tilt's inertia m l² cos² s vanishes, draining its momentum, and the berry is carried into the pole at −90°.
     Its accepted steps crept down unchecked (a rejected step's retry alone was held to the resolution of time): to
-    3.6e-16 s at 300 000 steps and 3.4e-19 s at the default 10⁷, 35 s later. Now the run stops when the steps the
-    error control asks for fall below 1.6e-14 s, in one step size and in islands, naming the berry."""
+    3.6e-16 s at 300 000 steps and 3.4e-19 s at the default 10⁷, 35 s later; then the run stopped when the steps the
+    error control asked for fell below 1.6e-14 s, which took a 300-berry cluster shaken at 4.1 Hz 200 s (800 000
+    steps from |cos s| = 1e-4). Now it stops once |cos s| has stayed below loop.POLE_STOP = 1e-4 for 1024 steps, at
+    steps far above that floor, in one step size and in islands, naming the berry."""
     import re
     from dataclasses import replace
 
@@ -215,17 +218,18 @@ def test_a_spherical_berry_carried_into_its_charts_pole_stops_at_the_step_floor(
     s = Solver(sc, max_steps=300_000)
     in_islands = replace(sc, solver=replace(sc.solver, islands=True, max_steps=300_000))
     for run in (s.run, lambda: simulate(in_islands)):
-        with pytest.raises(SolverError, match=r"spherical berry 'b' swung to -90\.0000°, where its swing–tilt") as e:
+        with pytest.raises(SolverError, match=r"spherical berry 'b' swung to -89\.99\d\d°, at the pole of its") as e:
             run()
         h = float(re.search(r"the steps shrank to ([0-9.e+-]+) s", str(e.value))[1])
-        assert 0.2 * 1.6e-14 <= h <= 1.6e-14  # the control's last proposal, at most a fifth below the floor
+        assert h > 1e-12  # the control's last proposal: over a hundred times the floor
     assert s.t == 0.0
 
 
 @pytest.mark.parametrize("angle, rates", [([1.396, 0.0], [-1000.0, 0.01]), ([-1.396, 0.3], [-1000.0, 0.0])])
 def test_a_hard_swing_at_80_degrees_that_passes_the_pole_still_runs(angle, rates):
-    """As hard a start without hinge damping keeps its tilt momentum: it passes the pole (as near as cos s = 2e-4)
-    every turn and runs, so no start in the documented ranges can be refused for the pole before the run."""
+    """As hard a start without hinge damping keeps its tilt momentum: it passes the pole every turn (as near as
+    |cos s| = 3e-7 and 6e-6 on the first, in under 60 steps below 1e-4) and runs, so no start in the documented ranges
+    can be refused for the pole before the run, nor the run for a pass (loop.POLE_STOP stops a berry that stays)."""
     sc = scene({"berries": [{"name": "b", "kind": "spherical", "mass": 0.011, "radius": 0.0135, "twig_length": 0.03,
                              "hinge_x": 0.0, "angle": angle, "angular_velocity": rates}], "solver": {"t_end": 1.0}})
     run = simulate(sc)

@@ -33,7 +33,8 @@ from ..results.run import Run
 from . import session as ses
 from . import state as st
 from .budget import check_samples
-from .loop import DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, REFUSED, STEP_UNDERFLOW, grid_last
+from .loop import (AT_POLE, DONE, IMPACTS_FULL, MAX_STEPS, NOT_FINITE, OUT_FULL, POLE_CHECKS, POLE_EVERY, POLE_STOP,
+                   REFUSED, STEP_UNDERFLOW, grid_last)
 from .stiffness import contact_hint, fixed_step_hint, least_steps, refuse_stiff
 from .tableau import BOGACKI_SHAMPINE, DOP853, DOPRI5, Tableau
 
@@ -70,6 +71,8 @@ STATUS_TEXT = {
     MAX_STEPS: "the step limit was reached",
     STEP_UNDERFLOW: "the step size fell below the resolution of time (the problem is too stiff for this tolerance)",
     NOT_FINITE: "the state became NaN or infinite",
+    AT_POLE: f"a spherical berry's swing stayed within |cos s| < {POLE_STOP:g} of its swing–tilt chart's pole for "
+             f"{POLE_CHECKS * POLE_EVERY} steps",
 }
 
 
@@ -89,10 +92,10 @@ def stopped(status: int, h: float, max_steps: int, pole: tuple[str, float] | Non
     shrank without end there, the step limit with the step size that needed so many steps (a stiff scene takes
     minutes to reach it: say what makes it slow) and the pairs in contact then (contact: stiffness.contact_hint), or
     the status's text."""
-    if pole and status in (MAX_STEPS, STEP_UNDERFLOW):
-        return (f"spherical berry {pole[0]!r} swung to {math.degrees(pole[1]):.4f}°, where its swing–tilt chart is "
-                "singular (a twig swung sideways flat, docs/model.md §1): the tilt turns ever faster near it and the "
-                f"steps shrank to {h:.3g} s; this model does not pass that pose")
+    if pole and status in (MAX_STEPS, STEP_UNDERFLOW, AT_POLE):
+        return (f"spherical berry {pole[0]!r} swung to {math.degrees(pole[1]):.4f}°, at the pole of its swing–tilt "
+                "chart (singular at ±90°: a twig swung sideways flat, docs/model.md §1): the tilt turns ever faster "
+                f"near it and the steps shrank to {h:.3g} s; this model does not pass that pose")
     why = STATUS_TEXT.get(status, f"status {status}")
     if status == MAX_STEPS:
         why += (f" ({max_steps} steps; the step size was {h:.3g} s, {1 / h if h > 0 else math.inf:.3g} steps per "
