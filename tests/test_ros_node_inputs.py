@@ -458,10 +458,11 @@ def test_real_time_input_times_out_to_zero_acceleration(ros, tmp_path):
 def test_poses_after_a_timeout_are_not_differenced_against_those_before(ros):
     """A gripper at rest whose poses stop for 2 s and come back 0.5 m away (moved while its publisher was down):
     the second difference across the silence was a spurious acceleration; after the timeout the poses start afresh
-    and the rachis, at rest, stays so."""
-    n = node(mode="realtime", use_sim_time=True, input_timeout=0.5)
+    and the rachis, at rest, stays so. (The timeout is set while the node runs, as `ros2 param set` would.)"""
+    n = node(mode="realtime", use_sim_time=True, input_timeout=0.0)
     clock = n.get_clock()
     try:
+        n.set_parameters([Parameter("input_timeout", value=0.5)])
         for t, z in [(1000.0, 0.0), (1000.01, 0.0), (1000.02, 0.0), (1002.0, 0.5), (1002.01, 0.5), (1002.02, 0.5)]:
             clock.set_ros_time_override(Time(seconds=t))
             n.on_tick()

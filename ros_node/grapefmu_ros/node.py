@@ -175,6 +175,7 @@ class SimulatorNode(Node):
         self.deepest = None  # (pair, δ, bound, t) pressed deepest past its bound since the last diagnostics
         self.deepest_of_radius = 0.0  # the deepest overlap over its pair's radius since the last diagnostics
         self.real_time_factor = gp("real_time_factor")
+        self.input_timeout = to_ns(gp("input_timeout"))  # ns, 0: none
         self.input_clock: int | None = None  # ns, the node's clock when the input held was accepted (real time)
         self.timeouts = self._timeouts_seen = 0  # times input_timeout zeroed the held acceleration; of them, said
         self.add_post_set_parameters_callback(self._on_parameters_set)
@@ -214,6 +215,8 @@ class SimulatorNode(Node):
                 if self.mode == "realtime" and self.clock0 != 0:
                     self.sim0, self.clock0 = self._sim_target(now), now
                 self.real_time_factor = p.value
+            elif p.name == "input_timeout":
+                self.input_timeout = to_ns(p.value)
             elif p.name == "use_sim_time" and self.mode == "realtime":
                 self._restart_clock()
 
@@ -504,7 +507,7 @@ class SimulatorNode(Node):
                 throttle_duration_sec=1.0)
             self._restart_clock()
         self.last_clock = clock
-        timeout = to_ns(self.get_parameter("input_timeout").value)
+        timeout = self.input_timeout
         if self.input_clock is not None and timeout > 0 and clock - self.input_clock > timeout:
             self._time_out(self.input_clock + timeout)
         self.advance(self._sim_target(clock) - self.solver.t)
@@ -519,7 +522,7 @@ class SimulatorNode(Node):
         self._motion, self._motion_acc = {2: [], 1: []}, np.zeros(6)
         self.timeouts += 1
         self.get_logger().warning(
-            f"no input for input_timeout = {self.get_parameter('input_timeout').value:g} s: zero acceleration held "
+            f"no input for input_timeout = {seconds(self.input_timeout):g} s: zero acceleration held "
             f"from simulated t = {self.solver.t:.6f} s (the rachis coasts on at its velocity)",
             throttle_duration_sec=5.0)
 
